@@ -1,0 +1,206 @@
+"""Uniform grid rebuilt every frame, in parallel (Wald et al. 2006, Sec. 3).
+
+Three passes, no Python lists and no per-cell allocation:
+1. count: each thread histograms the cells its slice of triangles overlaps;
+2. scan: per-cell totals -> `cell_start`, and each thread's write offset per cell;
+3. fill: each thread writes its triangle ids into its own offsets.
+Threads never write the same slot, so no atomics are needed, and every cell
+lists its triangles in ascending id order (deterministic output).
+
+Triangles are inserted by their (slightly widened) bounding box; the traversal
+culls the extra candidates against its frustum, which is cheaper than exact
+triangle/box tests at build time.
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import prange
+
+from ._jit import kernel, parallel_arith_kernel
+from .config import EPS_GRID_REL
+
+MAX_CELLS = 1 << 24
+MAX_DIM = 1024
+
+
+class Grid(NamedTuple):
+    """Flat uniform grid. Cell (ix, iy, iz) is `(iz * ny + iy) * nx + ix`."""
+    lo: np.ndarray          # (3,) f32 lower corner
+    hi: np.ndarray          # (3,) f32 upper corner
+    dims: np.ndarray        # (3,) i32 cells per axis
+    cell_size: np.ndarray   # (3,) f32
+    inv_cell: np.ndarray    # (3,) f32
+    cell_start: np.ndarray  # (n_cells + 1,) i32 CSR offsets into cell_tris
+    cell_tris: np.ndarray   # (n_refs,) i32 triangle ids
+
+
+@parallel_arith_kernel
+def _bounds(tri_verts, n_chunks):
+    """Bounding box of all vertices: (lo (3,), hi (3,)) f32.
+
+    NaN coordinates are skipped by the comparisons; an infinite coordinate
+    makes the box infinite and `build_grid` then takes the finite-only path.
+    """
+    n = tri_verts.shape[0]
+    part = np.empty((n_chunks, 6), np.float32)
+    for c in prange(n_chunks):
+        lo0 = lo1 = lo2 = np.float32(np.inf)
+        hi0 = hi1 = hi2 = np.float32(-np.inf)
+        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            for k in range(3):
+                x = tri_verts[t, 3 * k]
+                y = tri_verts[t, 3 * k + 1]
+                z = tri_verts[t, 3 * k + 2]
+                lo0 = x if x < lo0 else lo0
+                lo1 = y if y < lo1 else lo1
+                lo2 = z if z < lo2 else lo2
+                hi0 = x if x > hi0 else hi0
+                hi1 = y if y > hi1 else hi1
+                hi2 = z if z > hi2 else hi2
+        part[c, 0] = lo0
+        part[c, 1] = lo1
+        part[c, 2] = lo2
+        part[c, 3] = hi0
+        part[c, 4] = hi1
+        part[c, 5] = hi2
+    lo = np.empty(3, np.float32)
+    hi = np.empty(3, np.float32)
+    for a in range(3):
+        lo[a] = part[:, a].min()
+        hi[a] = part[:, 3 + a].max()
+    return lo, hi
+
+
+def _finite_bounds(tri_verts):
+    """Slow path: bounds over the triangles whose 9 coordinates are finite."""
+    ok = np.isfinite(tri_verts).all(axis=1)
+    if not ok.any():
+        return np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32)
+    pts = tri_verts[ok].reshape(-1, 3)
+    return pts.min(axis=0), pts.max(axis=0)
+
+
+def grid_dims(extent: np.ndarray, n_tris: int, density: float) -> np.ndarray:
+    """Cells per axis so that n_cells ~= density * n_tris, cells ~cubic.
+
+    Axes too thin for one cell get one, and the budget is re-spread over the
+    others (a flat floor must not collapse the grid to a 1-cell slab).
+    """
+    target = max(1.0, density * max(n_tris, 1))
+    ext = np.maximum(np.asarray(extent, np.float64), 0.0)
+    free = ext > 0
+    dims = np.ones(3, np.int64)
+    for _ in range(3):
+        if not free.any():
+            break
+        budget = target / np.prod(dims[~free]) if (~free).any() else target
+        s = (budget / np.prod(ext[free])) ** (1.0 / free.sum())
+        cells = ext * s
+        thin = free & (cells < 1.0)
+        if thin.any():
+            free &= ~thin
+            continue
+        dims[free] = np.maximum(1, np.round(cells[free])).astype(np.int64)
+        break
+    dims = np.minimum(dims, MAX_DIM)
+    while dims.prod() > MAX_CELLS:
+        dims = np.maximum(1, dims // 2)
+    return dims.astype(np.int32)
+
+
+@kernel
+def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
+    """Write ranges[t] = inclusive cell index range of triangle t's widened
+    bbox, or an empty range (x0 > x1) if a coordinate is not finite."""
+    ok = True
+    for a in range(3):
+        x0 = min(tri_verts[t, a], tri_verts[t, 3 + a], tri_verts[t, 6 + a]) - pad
+        x1 = max(tri_verts[t, a], tri_verts[t, 3 + a], tri_verts[t, 6 + a]) + pad
+        f0 = (x0 - lo[a]) * inv_cell[a]
+        f1 = (x1 - lo[a]) * inv_cell[a]
+        # one comparison rejects NaN and inf (int() of them is undefined)
+        ok = ok and abs(f0) < 1e9 and abs(f1) < 1e9
+        f0 = f0 if ok else 0.0
+        f1 = f1 if ok else 0.0
+        # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way
+        ranges[t, a] = min(max(int(f0), 0), dims[a] - 1)
+        ranges[t, 3 + a] = min(max(int(f1), 0), dims[a] - 1)
+    if not ok:
+        ranges[t, 0] = 1
+        ranges[t, 3] = 0
+
+
+@parallel_arith_kernel
+def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
+    n = tri_verts.shape[0]
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    n_cells = nx * ny * nz
+    ranges = np.empty((n, 6), np.int32)
+    hist = np.zeros((n_chunks, n_cells), np.int32)
+    # 1. count, one histogram per chunk
+    for c in prange(n_chunks):
+        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges)
+            for iz in range(ranges[t, 2], ranges[t, 5] + 1):
+                for iy in range(ranges[t, 1], ranges[t, 4] + 1):
+                    row = (iz * ny + iy) * nx
+                    for ix in range(ranges[t, 0], ranges[t, 3] + 1):
+                        hist[c, row + ix] += 1
+    # 2. scan: cell totals, then each chunk's write offset per cell
+    cell_start = np.empty(n_cells + 1, np.int32)
+    totals = np.zeros(n_cells, np.int32)
+    for cell in prange(n_cells):
+        s = 0
+        for c in range(n_chunks):
+            s += hist[c, cell]
+        totals[cell] = s
+    cell_start[0] = 0
+    acc = 0
+    for cell in range(n_cells):
+        acc += totals[cell]
+        cell_start[cell + 1] = acc
+    for cell in prange(n_cells):
+        off = cell_start[cell]
+        for c in range(n_chunks):
+            h = hist[c, cell]
+            hist[c, cell] = off
+            off += h
+    # 3. fill, each chunk into its own slots
+    cell_tris = np.empty(acc, np.int32)
+    for c in prange(n_chunks):
+        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            for iz in range(ranges[t, 2], ranges[t, 5] + 1):
+                for iy in range(ranges[t, 1], ranges[t, 4] + 1):
+                    row = (iz * ny + iy) * nx
+                    for ix in range(ranges[t, 0], ranges[t, 3] + 1):
+                        cell_tris[hist[c, row + ix]] = t
+                        hist[c, row + ix] += 1
+    return cell_start, cell_tris
+
+
+def build_grid(tri_verts: np.ndarray, density: float = 1.0, n_chunks: int = 0) -> Grid:
+    """Build the grid over tri_verts (n, 9) f32. `n_chunks` 0 = one per thread."""
+    import numba
+    n = tri_verts.shape[0]
+    if n_chunks <= 0:
+        n_chunks = numba.get_num_threads()
+    n_chunks = max(1, min(n_chunks, max(n, 1)))
+    lo, hi = _bounds(tri_verts, n_chunks) if n > 0 else _finite_bounds(tri_verts)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        lo, hi = _finite_bounds(tri_verts)
+    if not np.all(np.isfinite(lo)):            # empty scene: a unit box, no triangles
+        lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
+    lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
+    extent = hi64 - lo64
+    size = max(float(extent.max()), float(np.abs(np.concatenate([lo64, hi64])).max()) * 1e-6, 1e-30)
+    pad = EPS_GRID_REL * size
+    lo64 -= 2 * pad
+    hi64 += 2 * pad
+    dims = grid_dims(hi64 - lo64 - 4 * pad, n, density)
+    cell = (hi64 - lo64) / dims
+    grid_lo = lo64.astype(np.float32)
+    grid_hi = hi64.astype(np.float32)
+    cell_size = cell.astype(np.float32)
+    inv_cell = (1.0 / cell).astype(np.float32)
+    cell_start, cell_tris = _fill(tri_verts, grid_lo, inv_cell, dims, np.float32(pad), n_chunks)
+    return Grid(grid_lo, grid_hi, dims, cell_size, inv_cell, cell_start, cell_tris)

@@ -1,0 +1,66 @@
+"""Plain-Python wrappers around the tile drivers: validate, allocate, call."""
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from .config import EPS_CULL_REL, EPS_SHADOW_REL
+from .grid_build import Grid
+from .grid_cgt import N_COUNTERS
+from .tiles import tile_size_for, trace_primary, trace_shadows
+
+PACKET_SIZES = (4, 8, 16, 32)
+
+
+class Hits(NamedTuple):
+    """Closest hits per pixel, row-major from the top: (H*W,) arrays."""
+    t: np.ndarray        # f32 distance along the unit ray (inf on a miss)
+    prim: np.ndarray     # i32 triangle index, -1 on a miss
+    b1: np.ndarray       # f32 barycentric weight of vertex 1
+    b2: np.ndarray       # f32 barycentric weight of vertex 2
+    counters: np.ndarray  # (N_COUNTERS,) i64: packets, cells, tests, candidates, fallback rays
+
+
+def _layout(width, height, packet):
+    if packet not in PACKET_SIZES:
+        raise ValueError(f"packet must be one of {PACKET_SIZES}, got {packet}")
+    threads = numba.get_num_threads()
+    tile = tile_size_for(width, height, packet, threads)
+    n_tiles = -(-width // tile) * -(-height // tile)
+    return min(packet, 8), tile, n_tiles, threads
+
+
+def _cull_eps(grid: Grid) -> np.float32:
+    size = float(np.max(grid.hi - grid.lo))
+    return np.float32(EPS_CULL_REL * max(size, 1e-30))
+
+
+def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.5, 0.5)) -> Hits:
+    """Trace one camera ray per pixel (at sub-pixel offset `jitter`)."""
+    sub, tile, n_tiles, threads = _layout(width, height, packet)
+    n = width * height
+    out_t = np.empty(n, np.float32)
+    out_prim = np.empty(n, np.int32)
+    out_b1 = np.empty(n, np.float32)
+    out_b2 = np.empty(n, np.float32)
+    counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
+    trace_primary(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
+                  packet, sub, tile, threads, *grid[:5], grid.cell_start, grid.cell_tris,
+                  tri_verts, _cull_eps(grid), out_t, out_prim, out_b1, out_b2, counters)
+    return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))
+
+
+def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
+                packet=8, jitter=(0.5, 0.5)):
+    """Visibility (H*W,) f32 of one light (kind 0 point at light_vec, 1
+    directional along light_vec) from the surface points in `hits`, and the
+    (N_COUNTERS,) counters."""
+    sub, tile, n_tiles, threads = _layout(width, height, packet)
+    vis = np.zeros(width * height, np.float32)
+    counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
+    lx, ly, lz = (np.float32(c) for c in light_vec)
+    trace_shadows(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
+                  packet, sub, tile, threads, light_kind, lx, ly, lz, np.float32(EPS_SHADOW_REL),
+                  *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
+                  hits.prim, hits.b1, hits.b2, vis, counters)
+    return vis, counters.sum(axis=0)

@@ -1,0 +1,41 @@
+"""Slow, obviously correct references for the fast kernels."""
+import numpy as np
+from numba import njit, prange
+
+from raycore.triangle import intersect_ray
+
+
+@njit(parallel=True, cache=True)
+def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
+    """Closest hit of every ray against every triangle: (t, prim, b1, b2)."""
+    n = origins.shape[0]
+    out_t = np.full(n, np.inf, np.float32)
+    out_prim = np.full(n, -1, np.int32)
+    out_b1 = np.zeros(n, np.float32)
+    out_b2 = np.zeros(n, np.float32)
+    for i in prange(n):
+        best = t_max[i]
+        for tri in range(tri_verts.shape[0]):
+            hit, t, b1, b2 = intersect_ray(origins[i, 0], origins[i, 1], origins[i, 2],
+                                           dirs[i, 0], dirs[i, 1], dirs[i, 2],
+                                           tri_verts, tri, t_min[i], best)
+            if hit:
+                best = t
+                out_prim[i] = tri
+                out_b1[i] = b1
+                out_b2[i] = b2
+        out_t[i] = best if out_prim[i] >= 0 else np.inf
+    return out_t, out_prim, out_b1, out_b2
+
+
+def camera_rays(cam, width, height, jitter=(0.5, 0.5)):
+    """Camera rays in pixel order, straight from SPEC section 3 in float64."""
+    eye, f, r, u = cam[0:3], cam[3:6], cam[6:9], cam[9:12]
+    h, aspect = cam[12], cam[13]
+    ys, xs = np.mgrid[0:height, 0:width]
+    uu = (2.0 * (xs + jitter[0]) / width - 1.0) * h * aspect
+    vv = (1.0 - 2.0 * (ys + jitter[1]) / height) * h
+    d = f[None, :] + uu.reshape(-1, 1) * r[None, :] + vv.reshape(-1, 1) * u[None, :]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.broadcast_to(eye, d.shape)
+    return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
