@@ -5,9 +5,9 @@ from ._jit import kernel
 
 
 def camera_basis(eye, look_at, up, fov_deg, width, height):
-    """Pack the camera as a (14,) float32 array for the kernels:
-    eye(3), forward(3), right(3), up'(3), h = tan(fov/2), aspect = W/H.
-    Computed in float64 and rounded once."""
+    """Pack the camera as a (16,) float32 array for the kernels:
+    eye(3), forward(3), right(3), up'(3), h*aspect, h, 2 h aspect / W, 2 h / H
+    with h = tan(fov/2), aspect = W/H. Computed in float64, rounded once."""
     eye = np.asarray(eye, np.float64)
     f = np.asarray(look_at, np.float64) - eye
     f /= np.linalg.norm(f)
@@ -18,18 +18,19 @@ def camera_basis(eye, look_at, up, fov_deg, width, height):
     r /= norm_r
     u = np.cross(r, f)
     h = np.tan(np.radians(fov_deg) / 2.0)
-    return np.concatenate([eye, f, r, u, [h, width / height]]).astype(np.float32)
+    a = width / height
+    return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height]]).astype(np.float32)
 
 
 @kernel
-def primary_dir(cam, x, y, jx, jy, width, height):
+def primary_dir(cam, x, y, jx, jy):
     """Unit direction through pixel (x, y) at sub-pixel offset (jx, jy) in [0,1)
-    (0.5, 0.5 = pixel centre); y counts from the top."""
-    h = cam[12]
-    u = (2.0 * (x + jx) / width - 1.0) * h * cam[13]
-    v = (1.0 - 2.0 * (y + jy) / height) * h
+    (0.5, 0.5 = pixel centre); y counts from the top. SPEC's
+    u = (2 (x + jx) / W - 1) h aspect, v = (1 - 2 (y + jy) / H) h, in float32."""
+    u = (np.float32(x) + jx) * cam[14] - cam[12]
+    v = cam[13] - (np.float32(y) + jy) * cam[15]
     dx = cam[3] + u * cam[6] + v * cam[9]
     dy = cam[4] + u * cam[7] + v * cam[10]
     dz = cam[5] + u * cam[8] + v * cam[11]
-    inv = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
-    return np.float32(dx * inv), np.float32(dy * inv), np.float32(dz * inv)
+    inv = np.float32(1.0) / np.sqrt(dx * dx + dy * dy + dz * dz)
+    return dx * inv, dy * inv, dz * inv

@@ -13,7 +13,7 @@ from numba import prange
 
 from ._jit import fetch_add, kernel, parallel_kernel
 from .camera import primary_dir
-from .grid_cgt import (DX, DY, DZ, MAILBOX_SIZE, OX, OY, OZ, TMAX, TMIN,
+from .grid_cgt import (DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, OX, OY, OZ, TMAX, TMIN,
                        cgt_packet)
 from .grid_dda import dda_trace
 from .triangle import surface_point
@@ -32,45 +32,54 @@ def tile_size_for(width: int, height: int, packet: int, threads: int) -> int:
 
 
 @kernel
-def _packet_pixel(px, py, i, packet, sub_size):
-    """Pixel of ray slot i in the packet at (px, py): sub-packet-major order."""
-    ss = sub_size * sub_size
-    j = i // ss
-    r = i - j * ss
+def _sub_corner(px, py, j, packet, sub_size):
+    """Top-left pixel of sub-packet j of the packet whose corner is (px, py).
+    Ray r = ly * sub_size + lx of that sub-packet is pixel (x0 + lx, y0 + ly)."""
     n_sx = packet // sub_size
-    x = px + (j % n_sx) * sub_size + r % sub_size
-    y = py + (j // n_sx) * sub_size + r // sub_size
-    return x, y
+    return px + (j % n_sx) * sub_size, py + (j // n_sx) * sub_size
 
 
 @kernel
-def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, n_rays, sub_size,
-                       any_hit, sub, sub_active, sub_done, mailbox,
+def _ray_offsets(sub_size):
+    """(lx, ly) of ray r in a sub-packet, as tables so that per-ray loops run
+    over r alone (no division, vectorizable)."""
+    ss = sub_size * sub_size
+    lx = np.empty(ss, np.int64)
+    ly = np.empty(ss, np.int64)
+    for r in range(ss):
+        lx[r] = r % sub_size
+        ly[r] = r // sub_size
+    return lx, ly
+
+
+@kernel
+def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub, sub_active, sub_done, mailbox,
                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                        tri_verts, eps, counters, tile):
     """CGT for the packet, or single-ray DDA for each ray if it has no common
     major axis (rays pointing to both sides of every axis)."""
-    ok = cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, n_rays, sub_size,
-                    any_hit, sub, sub_active, sub_done, mailbox,
+    ok = cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub, sub_active, sub_done, mailbox,
                     g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                     tri_verts, eps, counters, tile)
     if ok:
         return
-    for i in range(n_rays):
-        hit_t[i] = rays[TMAX, i]
-        hit_prim[i] = -1
-        if rays[TMAX, i] > rays[TMIN, i]:
-            t, prim, b1, b2, cells, tests = dda_trace(
-                rays[OX, i], rays[OY, i], rays[OZ, i], rays[DX, i], rays[DY, i], rays[DZ, i],
-                rays[TMIN, i], rays[TMAX, i], any_hit,
-                g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts)
-            hit_t[i] = t
-            hit_prim[i] = prim
-            hit_b1[i] = b1
-            hit_b2[i] = b2
-            counters[tile, 1] += cells
-            counters[tile, 2] += tests
-            counters[tile, 4] += 1
+    for j in range(rays.shape[1]):
+        for r in range(rays.shape[2]):
+            hit_t[j, r] = rays[TMAX, j, r]
+            hit_prim[j, r] = -1
+            if rays[TMAX, j, r] > rays[TMIN, j, r]:
+                t, prim, b1, b2, cells, tests = dda_trace(
+                    rays[OX, j, r], rays[OY, j, r], rays[OZ, j, r],
+                    rays[DX, j, r], rays[DY, j, r], rays[DZ, j, r],
+                    rays[TMIN, j, r], rays[TMAX, j, r], any_hit,
+                    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts)
+                hit_t[j, r] = t
+                hit_prim[j, r] = prim
+                hit_b1[j, r] = b1
+                hit_b2[j, r] = b2
+                counters[tile, 1] += cells
+                counters[tile, 2] += tests
+                counters[tile, 4] += 1
 
 
 @parallel_kernel
@@ -85,20 +94,21 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = tiles_x * tiles_y
-    n_rays = packet * packet
-    n_sub = n_rays // (sub_size * sub_size)
+    ss = sub_size * sub_size
+    n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays = np.empty((8, n_rays), np.float32)
-        work = np.empty((8, n_rays), np.float32)
-        hit_t = np.empty(n_rays, np.float32)
-        hit_b1 = np.zeros(n_rays, np.float32)
-        hit_b2 = np.zeros(n_rays, np.float32)
-        hit_prim = np.empty(n_rays, np.int32)
+        rays = np.empty((8, n_sub, ss), np.float32)
+        work = np.empty((8, n_sub, ss), np.float32)
+        hit_t = np.empty((n_sub, ss), np.float32)
+        hit_b1 = np.zeros((n_sub, ss), np.float32)
+        hit_b2 = np.zeros((n_sub, ss), np.float32)
+        hit_prim = np.empty((n_sub, ss), np.int32)
         sub = np.empty((8, n_sub), np.float32)
         sub_active = np.empty(n_sub, np.int32)
         sub_done = np.empty(n_sub, np.int32)
         mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        off_x, off_y = _ray_offsets(sub_size)
         while True:
             tile = fetch_add(next_tile, 0, 1)
             if tile >= n_tiles:
@@ -107,31 +117,85 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             ty0 = (tile // tiles_x) * tile_size
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
-                    for i in range(n_rays):
-                        x, y = _packet_pixel(px, py, i, packet, sub_size)
-                        inside = x < width and y < height
-                        dx, dy, dz = primary_dir(cam, min(x, width - 1), min(y, height - 1),
-                                                 jx, jy, width, height)
-                        rays[OX, i] = cam[0]
-                        rays[OY, i] = cam[1]
-                        rays[OZ, i] = cam[2]
-                        rays[DX, i] = dx
-                        rays[DY, i] = dy
-                        rays[DZ, i] = dz
-                        rays[TMIN, i] = 0.0
-                        rays[TMAX, i] = np.inf if inside else -1.0
-                    _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, n_rays,
-                                       sub_size, False, sub, sub_active, sub_done, mailbox,
+                    for j in range(n_sub):
+                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+                        for r in range(ss):
+                            x = x0 + off_x[r]
+                            y = y0 + off_y[r]
+                            dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+                            rays[OX, j, r] = cam[0]
+                            rays[OY, j, r] = cam[1]
+                            rays[OZ, j, r] = cam[2]
+                            rays[DX, j, r] = dx
+                            rays[DY, j, r] = dy
+                            rays[DZ, j, r] = dz
+                            rays[TMIN, j, r] = F0
+                            rays[TMAX, j, r] = INF if (x < width) & (y < height) else -F1
+                    _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, False,
+                                       sub, sub_active, sub_done, mailbox,
                                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                                        tri_verts, eps, counters, tile)
-                    for i in range(n_rays):
-                        x, y = _packet_pixel(px, py, i, packet, sub_size)
-                        if x < width and y < height:
-                            p = y * width + x
-                            out_t[p] = hit_t[i]
-                            out_prim[p] = hit_prim[i]
-                            out_b1[p] = hit_b1[i]
-                            out_b2[p] = hit_b2[i]
+                    for j in range(n_sub):
+                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+                        for r in range(ss):
+                            x = x0 + off_x[r]
+                            y = y0 + off_y[r]
+                            if (x < width) & (y < height):
+                                p = y * width + x
+                                out_t[p] = hit_t[j, r]
+                                out_prim[p] = hit_prim[j, r]
+                                out_b1[p] = hit_b1[j, r]
+                                out_b2[p] = hit_b2[j, r]
+
+
+@kernel
+def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
+                light_kind, lx, ly, lz, offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
+                out_vis):
+    """Set up ray (j, r) of a shadow packet from pixel (x, y) toward the light;
+    inactive (TMAX < TMIN) for pixels outside the image, misses, and surfaces
+    facing away from the light (those get visibility 0 without a ray)."""
+    rays[TMIN, j, r] = 0.0
+    rays[TMAX, j, r] = -1.0
+    rays[OX, j, r] = cam[0]
+    rays[OY, j, r] = cam[1]
+    rays[OZ, j, r] = cam[2]
+    rays[DX, j, r] = cam[3]
+    rays[DY, j, r] = cam[4]
+    rays[DZ, j, r] = cam[5]
+    if x >= width or y >= height:
+        return
+    p = y * width + x
+    prim = hit_prim[p]
+    if prim < 0:
+        return
+    sx, sy, sz, nx, ny, nz = surface_point(tri_verts, prim, hit_b1[p], hit_b2[p])
+    vx, vy, vz = primary_dir(cam, x, y, jx, jy)
+    if nx * vx + ny * vy + nz * vz > 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    off = offset_scale * (max(abs(sx), abs(sy), abs(sz)) + 1.0)
+    ox = sx + nx * off
+    oy = sy + ny * off
+    oz = sz + nz * off
+    if light_kind == 0:
+        dx = lx - ox
+        dy = ly - oy
+        dz = lz - oz
+    else:
+        dx = -lx
+        dy = -ly
+        dz = -lz
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0 or nx * dx + ny * dy + nz * dz <= 0.0:
+        out_vis[p] = 0.0
+        return
+    rays[OX, j, r] = ox
+    rays[OY, j, r] = oy
+    rays[OZ, j, r] = oz
+    rays[DX, j, r] = dx / dist
+    rays[DY, j, r] = dy / dist
+    rays[DZ, j, r] = dz / dist
+    rays[TMAX, j, r] = dist * (1.0 - 1e-6) if light_kind == 0 else np.inf
 
 
 @parallel_kernel
@@ -150,20 +214,21 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = tiles_x * tiles_y
-    n_rays = packet * packet
-    n_sub = n_rays // (sub_size * sub_size)
+    ss = sub_size * sub_size
+    n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays = np.empty((8, n_rays), np.float32)
-        work = np.empty((8, n_rays), np.float32)
-        hit_t = np.empty(n_rays, np.float32)
-        hit_b1 = np.zeros(n_rays, np.float32)
-        hit_b2 = np.zeros(n_rays, np.float32)
-        hit_p = np.empty(n_rays, np.int32)
+        rays = np.empty((8, n_sub, ss), np.float32)
+        work = np.empty((8, n_sub, ss), np.float32)
+        hit_t = np.empty((n_sub, ss), np.float32)
+        occ_b1 = np.zeros((n_sub, ss), np.float32)
+        occ_b2 = np.zeros((n_sub, ss), np.float32)
+        occ_prim = np.empty((n_sub, ss), np.int32)
         sub = np.empty((8, n_sub), np.float32)
         sub_active = np.empty(n_sub, np.int32)
         sub_done = np.empty(n_sub, np.int32)
         mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        off_x, off_y = _ray_offsets(sub_size)
         while True:
             tile = fetch_add(next_tile, 0, 1)
             if tile >= n_tiles:
@@ -172,55 +237,20 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             ty0 = (tile // tiles_x) * tile_size
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
-                    for i in range(n_rays):
-                        x, y = _packet_pixel(px, py, i, packet, sub_size)
-                        rays[TMIN, i] = 0.0
-                        rays[TMAX, i] = -1.0          # inactive unless set below
-                        rays[OX, i] = cam[0]
-                        rays[OY, i] = cam[1]
-                        rays[OZ, i] = cam[2]
-                        rays[DX, i] = cam[3]
-                        rays[DY, i] = cam[4]
-                        rays[DZ, i] = cam[5]
-                        if x >= width or y >= height:
-                            continue
-                        p = y * width + x
-                        prim = hit_prim[p]
-                        if prim < 0:
-                            continue
-                        sx, sy, sz, nx, ny, nz = surface_point(tri_verts, prim, hit_b1[p], hit_b2[p])
-                        vx, vy, vz = primary_dir(cam, x, y, jx, jy, width, height)
-                        if nx * vx + ny * vy + nz * vz > 0.0:
-                            nx, ny, nz = -nx, -ny, -nz
-                        big = max(abs(sx), abs(sy), abs(sz))
-                        off = offset_scale * (big + 1.0)
-                        ox = sx + nx * off
-                        oy = sy + ny * off
-                        oz = sz + nz * off
-                        if light_kind == 0:
-                            dx = lx - ox
-                            dy = ly - oy
-                            dz = lz - oz
-                        else:
-                            dx = -lx
-                            dy = -ly
-                            dz = -lz
-                        dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-                        if dist == 0.0 or nx * dx + ny * dy + nz * dz <= 0.0:
-                            out_vis[p] = 0.0
-                            continue
-                        rays[OX, i] = ox
-                        rays[OY, i] = oy
-                        rays[OZ, i] = oz
-                        rays[DX, i] = dx / dist
-                        rays[DY, i] = dy / dist
-                        rays[DZ, i] = dz / dist
-                        rays[TMAX, i] = dist * (1.0 - 1e-6) if light_kind == 0 else np.inf
-                    _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_p, n_rays,
-                                       sub_size, True, sub, sub_active, sub_done, mailbox,
+                    for j in range(n_sub):
+                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+                        for r in range(ss):
+                            _shadow_ray(rays, j, r, x0 + off_x[r], y0 + off_y[r],
+                                        cam, width, height, jx, jy, light_kind, lx, ly, lz,
+                                        offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
+                                        out_vis)
+                    _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
+                                       sub, sub_active, sub_done, mailbox,
                                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                                        tri_verts, eps, counters, tile)
-                    for i in range(n_rays):
-                        x, y = _packet_pixel(px, py, i, packet, sub_size)
-                        if x < width and y < height and rays[TMAX, i] > rays[TMIN, i]:
-                            out_vis[y * width + x] = 1.0 if hit_p[i] < 0 else 0.0
+                    for j in range(n_sub):
+                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+                        for r in range(ss):
+                            if rays[TMAX, j, r] > rays[TMIN, j, r]:
+                                p = (y0 + off_y[r]) * width + x0 + off_x[r]
+                                out_vis[p] = F1 if occ_prim[j, r] < 0 else F0

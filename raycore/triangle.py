@@ -33,6 +33,10 @@ def ray_axes(dx, dy, dz):
     return kx, ky, kz
 
 
+ZERO = np.float32(0.0)
+ONE = np.float32(1.0)
+
+
 @kernel
 def woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
     """Edge functions and scaled distance for one ray and one triangle.
@@ -40,6 +44,8 @@ def woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
     a*, b*, c*: vertices minus the ray origin, permuted (x=kx, y=ky, z=kz).
     sx = d[kx]/d[kz], sy = d[ky]/d[kz], sz = 1/d[kz].
     Returns (hit, t, b1, b2): b1, b2 are the barycentric weights of b and c.
+    Branch-free (bitwise logic, float32 constants) so that a loop over rays
+    calling it vectorizes.
     """
     # shear the vertices onto the ray's 2D plane
     Ax = ax - sx * az
@@ -52,12 +58,12 @@ def woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
     U = Cx * By - Cy * Bx
     V = Ax * Cy - Ay * Cx
     W = Bx * Ay - By * Ax
-    outside = ((U < 0.0) or (V < 0.0) or (W < 0.0)) and ((U > 0.0) or (V > 0.0) or (W > 0.0))
+    outside = ((U < ZERO) | (V < ZERO) | (W < ZERO)) & ((U > ZERO) | (V > ZERO) | (W > ZERO))
     det = U + V + W
     # one deferred divide: t = sz * (U az + V bz + W cz) / det
     T = sz * (U * az + V * bz + W * cz)
-    inv_det = 1.0 / det
-    hit = (not outside) and det != 0.0
+    inv_det = ONE / det
+    hit = (not outside) & (det != ZERO)
     return hit, T * inv_det, V * inv_det, W * inv_det
 
 
@@ -71,7 +77,7 @@ def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
     kx, ky, kz = ray_axes(dx, dy, dz)
     o = (ox, oy, oz)
     d = (dx, dy, dz)
-    sz = 1.0 / d[kz]
+    sz = ONE / d[kz]
     sx = d[kx] * sz
     sy = d[ky] * sz
     v = tri_verts[tri]
@@ -80,7 +86,7 @@ def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
         v[3 + kx] - o[kx], v[3 + ky] - o[ky], v[3 + kz] - o[kz],
         v[6 + kx] - o[kx], v[6 + ky] - o[ky], v[6 + kz] - o[kz],
         sx, sy, sz)
-    hit = hit and t > t_min and t < t_max
+    hit = hit & (t > t_min) & (t < t_max)
     return hit, t, b1, b2
 
 

@@ -30,8 +30,10 @@ def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
 
 def camera_rays(cam, width, height, jitter=(0.5, 0.5)):
     """Camera rays in pixel order, straight from SPEC section 3 in float64."""
+    cam = np.asarray(cam, np.float64)
     eye, f, r, u = cam[0:3], cam[3:6], cam[6:9], cam[9:12]
-    h, aspect = cam[12], cam[13]
+    h = cam[13]
+    aspect = cam[12] / h
     ys, xs = np.mgrid[0:height, 0:width]
     uu = (2.0 * (xs + jitter[0]) / width - 1.0) * h * aspect
     vv = (1.0 - 2.0 * (ys + jitter[1]) / height) * h
