@@ -1,0 +1,1 @@
+"""Scene file -> meshes -> vertex positions at time t."""

@@ -1,0 +1,139 @@
+"""anim.yaml version 1 (../shared/SPEC.md section 2), validated by pydantic.
+
+Unknown keys are errors (`extra="forbid"`): a typo must not pass silently.
+Extensions beyond the spec's example (all optional, backward compatible):
+`render.ambient`, `render.grid_density`, lights of `type: directional`.
+"""
+from typing import Annotated, Dict, List, Literal, Optional, Tuple
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Vec3 = Tuple[float, float, float]
+Interp = Literal["linear", "catmull-rom", "cubic"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Frames(Strict):
+    start: int = 0
+    end: int = 0
+    fps: Annotated[float, Field(gt=0)] = 24.0
+
+    @model_validator(mode="after")
+    def _order(self):
+        if self.end < self.start:
+            raise ValueError(f"end ({self.end}) is before start ({self.start})")
+        return self
+
+
+class Output(Strict):
+    path: str = "out/frame_####.exr"
+    resolution: Tuple[Annotated[int, Field(gt=0, le=16384)], Annotated[int, Field(gt=0, le=16384)]] = (512, 512)
+    aovs: List[Literal["N", "P", "id"]] = []
+
+
+class CameraKey(Strict):
+    t: float
+    eye: Vec3
+    look_at: Vec3
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: Annotated[float, Field(gt=0, lt=180)] = 40.0
+
+
+class Camera(Strict):
+    eye: Optional[Vec3] = None
+    look_at: Optional[Vec3] = None
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: Annotated[float, Field(gt=0, lt=180)] = 40.0
+    keys: Optional[List[CameraKey]] = None
+    interpolation: Interp = "catmull-rom"
+
+    @model_validator(mode="after")
+    def _static_or_keyed(self):
+        if self.keys is None and (self.eye is None or self.look_at is None):
+            raise ValueError("needs either eye and look_at, or keys")
+        if self.keys is not None and len(self.keys) == 0:
+            raise ValueError("keys is empty")
+        return self
+
+
+class Render(Strict):
+    accel: Literal["grid"] = "grid"
+    packet: Literal[4, 8, 16, 32] = 16
+    shadows: bool = True
+    spp: Annotated[int, Field(ge=1, le=1024)] = 1
+    background: Vec3 = (0.0, 0.0, 0.0)
+    ambient: Annotated[float, Field(ge=0)] = 0.03
+    grid_density: Annotated[float, Field(gt=0, le=64)] = 1.0
+
+
+class Light(Strict):
+    type: Literal["point", "directional"] = "point"
+    position: Optional[Vec3] = None
+    direction: Optional[Vec3] = None
+    color: Vec3 = (1.0, 1.0, 1.0)
+    intensity: Annotated[float, Field(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _placed(self):
+        if self.type == "point" and self.position is None:
+            raise ValueError("a point light needs a position")
+        if self.type == "directional" and self.direction is None:
+            raise ValueError("a directional light needs a direction")
+        return self
+
+
+class Material(Strict):
+    diffuse: Vec3 = (0.8, 0.8, 0.8)
+    specular: Annotated[float, Field(ge=0)] = 0.0
+    shininess: Annotated[float, Field(ge=0)] = 32.0
+    texture: Optional[str] = None
+
+
+class Track(Strict):
+    interpolation: Interp = "linear"
+    keys: List[List[float]]
+
+
+class Transform(Strict):
+    translation: Optional[Track] = None
+    rotation: Optional[Track] = None
+    scale: Optional[Track] = None
+
+
+class Keyframe(Strict):
+    t: float
+    mesh: str
+
+
+class Object(Strict):
+    name: str
+    material: Optional[str] = None
+    mesh: Optional[str] = None
+    transform: Optional[Transform] = None
+    keyframes: Optional[List[Keyframe]] = None
+    interpolation: Interp = "linear"
+    extrapolate: Literal["clamp", "loop"] = "clamp"
+
+    @model_validator(mode="after")
+    def _kind(self):
+        if (self.mesh is None) == (self.keyframes is None):
+            raise ValueError("needs exactly one of 'mesh' or 'keyframes'")
+        if self.keyframes is not None and self.transform is not None:
+            raise ValueError("'transform' goes with 'mesh', not with 'keyframes'")
+        if self.keyframes is not None and len(self.keyframes) == 0:
+            raise ValueError("keyframes is empty")
+        return self
+
+
+class SceneFile(Strict):
+    version: Literal[1]
+    frames: Frames = Frames()
+    output: Output = Output()
+    camera: Camera
+    render: Render = Render()
+    lights: List[Light] = []
+    materials: Dict[str, Material] = {}
+    objects: List[Object]

@@ -1,0 +1,1 @@
+"""Command line: click commands that parse options, call the library, print."""

@@ -1,0 +1,128 @@
+"""`frustrace` command line (../shared/SPEC.md section 1).
+
+Exit codes: 0 success, 2 bad input (one line naming file, key and problem),
+1 internal error.
+"""
+import os
+import sys
+from pathlib import Path
+
+import click
+
+from anim.errors import SceneError
+
+
+class Group(click.Group):
+    """Turns SceneError into one line on stderr and exit code 2."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except SceneError as exc:
+            click.echo(f"frustrace: error: {exc}", err=True)
+            sys.exit(2)
+        except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit):
+            raise
+        except KeyboardInterrupt:
+            click.echo("frustrace: interrupted; finished frames are complete, none is half-written", err=True)
+            sys.exit(130)
+        except Exception as exc:                      # internal error: exit 1
+            if os.environ.get("FRUSTRACE_DEBUG"):
+                raise
+            click.echo(f"frustrace: internal error: {type(exc).__name__}: {exc} "
+                       "(set FRUSTRACE_DEBUG=1 for a traceback)", err=True)
+            sys.exit(1)
+
+
+@click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option("0.1.0", prog_name="frustrace")
+def main():
+    """frustrace: a frustum-packet ray caster for keyframed mesh animations.
+
+    Each frame: interpolate vertices, rebuild a uniform grid, trace NxN ray
+    packets with Coherent Grid Traversal, shade with shadows, write OpenEXR.
+    """
+
+
+def parse_frames(text, scene):
+    if text is None:
+        return scene.frame_numbers
+    try:
+        a, _, b = text.partition(":")
+        start = int(a) if a else scene.spec.frames.start
+        end = int(b) if b else (start if not _ else scene.spec.frames.end)
+    except ValueError:
+        raise click.BadParameter(f"expected A:B (frame numbers), got {text!r}", param_hint="--frames")
+    if end < start:
+        raise click.BadParameter(f"end {end} is before start {start}", param_hint="--frames")
+    return list(range(start, end + 1))
+
+
+@main.command()
+@click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Directory for the frames (default: output.path of the scene, relative to it).")
+@click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
+@click.option("--accel", type=click.Choice(["grid"]), help="Acceleration structure (default: render.accel).")
+@click.option("--packet", type=click.Choice(["4", "8", "16", "32"]), help="Primary-ray packet size N (NxN rays per frustum; default: render.packet).")
+@click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
+@click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
+@click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp); 1 = the pixel-centre ray.")
+@click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames).")
+@click.option("--resume", is_flag=True, help="Skip frames whose file already exists.")
+@click.option("--overwrite", is_flag=True, help="Replace frames that already exist.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary table.")
+def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, stats_path,
+           resume, overwrite, quiet):
+    """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
+    if resume and overwrite:
+        raise click.UsageError("--resume and --overwrite exclude each other")
+    from anim.scene import AnimatedScene
+    from raycore._jit import set_threads
+    from raycore.config import RenderConfig
+    from .pipeline import RenderJob, frame_path, render_animation
+    from .report import progress, summary_table
+
+    scene = AnimatedScene(anim_yaml)
+    spec = scene.spec
+    frames = parse_frames(frames_text, scene)
+    n_threads = set_threads(threads)
+    cfg = RenderConfig(width=spec.output.resolution[0], height=spec.output.resolution[1],
+                       packet=int(packet) if packet else spec.render.packet, threads=n_threads,
+                       spp=spp or spec.render.spp, shadows=spec.render.shadows and not no_shadows,
+                       accel=accel or spec.render.accel, grid_density=spec.render.grid_density,
+                       background=tuple(spec.render.background), ambient=spec.render.ambient,
+                       aovs=tuple(spec.output.aovs))
+    first = Path(frame_path(spec.output.path, frames[0]))
+    frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
+    stats_path = stats_path or frames_dir / "stats.json"
+    job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite)
+    show = not quiet and sys.stderr.isatty()
+    with progress(len(frames), show) as on_frame:
+        stats = render_animation(job, on_frame)
+    if not quiet:
+        summary_table(stats)
+
+
+@main.command()
+@click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
+def check(anim_yaml):
+    """Validate ANIM_YAML (schema, meshes, keys) and summarise it; render nothing."""
+    from anim.scene import AnimatedScene
+    scene = AnimatedScene(anim_yaml)
+    spec = scene.spec
+    moving = sum(1 for o in scene.objects if not o.static)
+    click.echo(f"{anim_yaml}: ok")
+    click.echo(f"  frames {spec.frames.start}..{spec.frames.end} at {spec.frames.fps:g} fps, "
+               f"{spec.output.resolution[0]}x{spec.output.resolution[1]}, spp {spec.render.spp}")
+    click.echo(f"  {len(scene.objects)} objects ({moving} moving), {scene.faces.shape[0]} triangles, "
+               f"{scene.n_vertices} vertices")
+    click.echo(f"  {len(spec.lights)} lights, {len(scene.materials) - 1} materials, "
+               f"{len(scene.texture_paths)} textures, camera {'animated' if spec.camera.keys else 'static'}")
+    for o in scene.objects:
+        kind = "static" if o.static else ("rigid" if o.rigid else "deforming")
+        click.echo(f"    {o.name}: {len(o.faces)} triangles, {kind}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,38 @@
+"""Progress bar and the per-phase summary table (rich)."""
+import contextlib
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.table import Table
+
+
+@contextlib.contextmanager
+def progress(n_frames, show):
+    """Yields a per-frame callback; draws a bar only when `show` (a terminal)."""
+    if not show:
+        yield None
+        return
+    with Progress(TextColumn("frames"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TextColumn("{task.fields[fps]}"), TimeRemainingColumn(),
+                  console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("render", total=n_frames, fps="")
+
+        def on_frame(row):
+            ms = sum(row[k] for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"))
+            bar.update(task, advance=1, fps=f"{1000.0 / ms:.1f} fps" if ms > 0 else "")
+        yield on_frame
+
+
+def summary_table(stats):
+    s = stats["summary"]
+    med = s["median_ms"]
+    table = Table(title=f"{stats['scene']}  {stats['resolution'][0]}x{stats['resolution'][1]}  "
+                        f"packet {stats['packet']}  threads {stats['threads']}  "
+                        f"{len(stats['frames'])} frames (median ms per frame)")
+    for col in ("interp", "build", "trace", "shade", "shadow", "write"):
+        table.add_column(col, justify="right")
+    table.add_row(*(f"{med[k + '_ms']:.2f}" for k in ("interp", "build", "trace", "shade", "shadow", "write")))
+    console = Console()
+    console.print(table)
+    console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
+                  f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps)")

@@ -1,0 +1,142 @@
+"""One frame, phase by phase: build -> trace -> shadow -> shade.
+
+Inputs are flat arrays only (no scene-file objects), so `raycore` never needs
+`anim`. Each phase is timed apart; the shadow pass is skipped when there are
+no lights or shadows are off, the texture path when nothing is textured, and
+the AOV writes when none are asked for.
+"""
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+from .camera import camera_basis
+from .config import RenderConfig
+from .grid_build import build_grid
+from .mesh import gather_triangles, vertex_normals
+from .shade import shade_pixels
+from .trace import trace_camera, trace_light
+
+
+class Geometry(NamedTuple):
+    """Triangles of one frame (all objects concatenated)."""
+    vertices: np.ndarray      # (n_v, 3) f32, this frame's positions
+    faces: np.ndarray         # (n_t, 3) i32
+    tri_material: np.ndarray  # (n_t,) i32 index into Shading.materials
+    uvs: np.ndarray           # (n_v, 2) f32, or (0, 2) when untextured
+    vf_start: np.ndarray      # vertex -> faces CSR (see mesh.vertex_face_csr)
+    vf_faces: np.ndarray
+
+
+class Shading(NamedTuple):
+    materials: np.ndarray     # (n_mat, 8) f32, see shade.py
+    tex_data: np.ndarray      # f32 texels
+    tex_info: np.ndarray      # (n_tex, 3) i64
+    lights: np.ndarray        # (n_light, 8) f32, see shade.py
+
+
+class CameraPose(NamedTuple):
+    eye: tuple
+    look_at: tuple
+    up: tuple
+    fov: float
+
+
+class FrameResult(NamedTuple):
+    rgba: np.ndarray          # (H, W, 4) f32
+    z: np.ndarray             # (H, W) f32, +inf on a miss
+    aovs: dict                # name -> (H, W) f32 channels
+    timings: dict             # phase -> ms
+    counters: dict            # rays, tri_tests, cells, ...
+
+
+def sample_offsets(spp: int) -> list:
+    """Sub-pixel offsets: the pixel centre for spp = 1, else a Hammersley set
+    (stratified in x, radical inverse in y): deterministic, low discrepancy."""
+    if spp <= 1:
+        return [(0.5, 0.5)]
+    out = []
+    for i in range(spp):
+        bits, f, inv = i, 0.0, 0.5
+        while bits:
+            f += inv * (bits & 1)
+            bits >>= 1
+            inv *= 0.5
+        out.append(((i + 0.5) / spp, f))
+    return out
+
+
+def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig) -> FrameResult:
+    W, H = cfg.width, cfg.height
+    timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
+    counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
+    t0 = time.perf_counter()
+    tri_verts = np.empty((geom.faces.shape[0], 9), np.float32)
+    gather_triangles(geom.vertices, geom.faces, tri_verts)
+    grid = build_grid(tri_verts, cfg.grid_density)
+    timings["build_ms"] = (time.perf_counter() - t0) * 1e3
+    counters["grid_dims"] = [int(d) for d in grid.dims]
+
+    t0 = time.perf_counter()
+    normals = np.empty((geom.vertices.shape[0], 3), np.float32)
+    vertex_normals(tri_verts, geom.vf_start, geom.vf_faces, normals)
+    timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
+
+    cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)
+    bg = np.asarray(cfg.background, np.float32)
+    n_lights = shading.lights.shape[0]
+    cast_shadows = cfg.shadows and n_lights > 0 and geom.faces.shape[0] > 0
+    want_aov = any(a in cfg.aovs for a in ("N", "P"))
+    acc_rgba = np.zeros((H * W, 4), np.float32)
+    z = np.full(H * W, np.inf, np.float32)
+    rgba = np.empty((H * W, 4), np.float32)
+    z_s = np.empty(H * W, np.float32)
+    aov_n = np.empty((H * W if want_aov else 0, 3), np.float32)
+    aov_p = np.empty_like(aov_n)
+    first_prim = None
+    offsets = sample_offsets(cfg.spp)
+    for jitter in offsets:
+        t0 = time.perf_counter()
+        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter)
+        timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
+        counters["rays"] += W * H
+        counters["cells"] += int(hits.counters[1])
+        counters["tri_tests"] += int(hits.counters[2])
+        counters["fallback_rays"] += int(hits.counters[4])
+
+        t0 = time.perf_counter()
+        vis = np.empty((n_lights if cast_shadows else 0, H * W), np.float32)
+        if cast_shadows:
+            for li in range(n_lights):
+                kind = int(shading.lights[li, 0])
+                vis[li], c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
+                                         shading.lights[li, 1:4], cfg.packet, jitter)
+                counters["shadow_rays"] += int(np.count_nonzero(hits.prim >= 0))
+                counters["tri_tests"] += int(c[2])
+                counters["cells"] += int(c[1])
+        timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
+
+        t0 = time.perf_counter()
+        shade_pixels(cam, W, H, np.float32(jitter[0]), np.float32(jitter[1]),
+                     hits.t, hits.prim, hits.b1, hits.b2, tri_verts, geom.faces, normals,
+                     geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
+                     shading.tex_info, shading.lights, vis, cast_shadows, bg,
+                     np.float32(cfg.ambient), rgba, z_s, want_aov and first_prim is None,
+                     aov_n, aov_p)
+        acc_rgba += rgba
+        np.minimum(z, z_s, out=z)
+        if first_prim is None:
+            first_prim = hits.prim
+        timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
+    if len(offsets) > 1:
+        acc_rgba /= len(offsets)
+    aovs = {}
+    if "N" in cfg.aovs:
+        for i, c in enumerate("XYZ"):
+            aovs[f"N.{c}"] = aov_n[:, i].reshape(H, W)
+    if "P" in cfg.aovs:
+        for i, c in enumerate("XYZ"):
+            aovs[f"P.{c}"] = aov_p[:, i].reshape(H, W)
+    if "id" in cfg.aovs:
+        aovs["id"] = first_prim.astype(np.float32).reshape(H, W)
+    return FrameResult(acc_rgba.reshape(H, W, 4), z.reshape(H, W), aovs, timings, counters)

@@ -1,0 +1,85 @@
+"""The one OpenImageIO module: EXR frames out (atomically), textures in, PNG previews.
+
+Channels R G B A are stored as half, Z and AOVs as float32 (SPEC section 4).
+OpenImageIO's Python binding takes one dtype per call, so the frame is handed
+over as float32 and OpenImageIO converts RGBA to half while writing.
+The file is written under a temporary name in the same directory and renamed,
+so a killed render never leaves a half-written frame behind.
+"""
+import os
+
+import numpy as np
+import OpenImageIO as oiio
+
+HALF_CHANNELS = ("R", "G", "B", "A")
+
+
+def write_exr(path: str, channels: dict, metadata: dict) -> None:
+    """channels: name -> (H, W) float32 array, in file order; R G B A first."""
+    names = list(channels)
+    height, width = next(iter(channels.values())).shape
+    pixels = np.empty((height, width, len(names)), np.float32)
+    for i, name in enumerate(names):
+        pixels[:, :, i] = channels[name]
+    spec = oiio.ImageSpec(width, height, len(names), "float")
+    spec.channelnames = tuple(names)
+    spec.channelformats = tuple(oiio.TypeDesc("half" if n in HALF_CHANNELS else "float")
+                                for n in names)
+    spec.attribute("compression", "zip")
+    for key, value in metadata.items():
+        spec.attribute(key, value)
+    directory = os.path.dirname(os.path.abspath(path))
+    tmp = os.path.join(directory, f".{os.path.basename(path)}.{os.getpid()}.tmp.exr")
+    out = oiio.ImageOutput.create(tmp)
+    if out is None:
+        raise OSError(f"{path}: OpenImageIO cannot create an EXR writer: {oiio.geterror()}")
+    try:
+        if not (out.open(tmp, spec) and out.write_image(pixels)):
+            raise OSError(f"{path}: {out.geterror()}")
+        out.close()
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def read_exr(path: str):
+    """(channel names, (H, W, C) float32 pixels, spec) — for tests and tools."""
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise OSError(f"{path}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image("float")
+        return list(spec.channelnames), pixels, spec
+    finally:
+        inp.close()
+
+
+def write_png_preview(path: str, rgb: np.ndarray) -> None:
+    """Tone-mapped (clamped, sRGB-encoded) 8-bit PNG of a linear (H, W, 3) image."""
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.power(np.maximum(rgb, 0), 1 / 2.4) - 0.055)
+    img = (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+    out = oiio.ImageOutput.create(path)
+    spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, "uint8")
+    if not (out.open(path, spec) and out.write_image(img)):
+        raise OSError(f"{path}: {out.geterror()}")
+    out.close()
+
+
+def read_texture(path: str) -> np.ndarray:
+    """(H, W, 3) float32 linear RGB of an image file (grey is replicated, alpha dropped)."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"{path}: {oiio.geterror()}")
+    try:
+        pixels = inp.read_image("float")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise OSError(f"{path}: cannot read pixels")
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    if pixels.shape[2] < 3:
+        pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
+    return np.ascontiguousarray(pixels[:, :, :3], np.float32)
