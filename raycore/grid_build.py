@@ -118,8 +118,10 @@ def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
         x1 = max(tri_verts[t, a], tri_verts[t, 3 + a], tri_verts[t, 6 + a]) + pad
         f0 = (x0 - lo[a]) * inv_cell[a]
         f1 = (x1 - lo[a]) * inv_cell[a]
-        # one comparison rejects NaN and inf (int() of them is undefined)
-        ok = ok and abs(f0) < 1e9 and abs(f1) < 1e9
+        # NaN and inf propagate through the sum (min/max may skip a NaN);
+        # the index bounds keep int() defined
+        total = tri_verts[t, a] + tri_verts[t, 3 + a] + tri_verts[t, 6 + a]
+        ok = ok and abs(total) < np.inf and abs(f0) < 1e9 and abs(f1) < 1e9
         f0 = f0 if ok else 0.0
         f1 = f1 if ok else 0.0
         # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way

@@ -254,3 +254,54 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                             if rays[TMAX, j, r] > rays[TMIN, j, r]:
                                 p = (y0 + off_y[r]) * width + x0 + off_x[r]
                                 out_vis[p] = F1 if occ_prim[j, r] < 0 else F0
+
+
+@parallel_kernel
+def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, any_hit,
+                    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
+                    out_t, out_prim, out_b1, out_b2, counters):
+    """Arbitrary rays (n, 3) f32, grouped into packets of packet^2 consecutive
+    rays (the caller orders them coherently); same kernels as the camera path.
+    counters: (n_packets, N_COUNTERS) int64."""
+    n = origins.shape[0]
+    ss = sub_size * sub_size
+    n_sub = packet * packet // ss
+    per_packet = n_sub * ss
+    n_packets = (n + per_packet - 1) // per_packet
+    next_packet = np.zeros(1, np.int64)
+    for _w in prange(n_workers):
+        rays = np.empty((8, n_sub, ss), np.float32)
+        work = np.empty((8, n_sub, ss), np.float32)
+        hit_t = np.empty((n_sub, ss), np.float32)
+        hit_b1 = np.zeros((n_sub, ss), np.float32)
+        hit_b2 = np.zeros((n_sub, ss), np.float32)
+        hit_prim = np.empty((n_sub, ss), np.int32)
+        sub = np.empty((8, n_sub), np.float32)
+        sub_active = np.empty(n_sub, np.int32)
+        sub_done = np.empty(n_sub, np.int32)
+        mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        while True:
+            pk = fetch_add(next_packet, 0, 1)
+            if pk >= n_packets:
+                break
+            for j in range(n_sub):
+                for r in range(ss):
+                    i = pk * per_packet + j * ss + r
+                    k = min(i, n - 1)
+                    for a in range(3):
+                        rays[OX + a, j, r] = origins[k, a]
+                        rays[DX + a, j, r] = dirs[k, a]
+                    rays[TMIN, j, r] = t_min[k]
+                    rays[TMAX, j, r] = t_max[k] if i < n else -F1
+            _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
+                               sub, sub_active, sub_done, mailbox,
+                               g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
+                               tri_verts, eps, counters, pk)
+            for j in range(n_sub):
+                for r in range(ss):
+                    i = pk * per_packet + j * ss + r
+                    if i < n:
+                        out_t[i] = hit_t[j, r]
+                        out_prim[i] = hit_prim[j, r]
+                        out_b1[i] = hit_b1[j, r]
+                        out_b2[i] = hit_b2[j, r]

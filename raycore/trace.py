@@ -7,7 +7,7 @@ import numpy as np
 from .config import EPS_CULL_REL, EPS_SHADOW_REL
 from .grid_build import Grid
 from .grid_cgt import N_COUNTERS
-from .tiles import tile_size_for, trace_primary, trace_shadows
+from .tiles import tile_size_for, trace_primary, trace_ray_batch, trace_shadows
 
 PACKET_SIZES = (4, 8, 16, 32)
 
@@ -64,3 +64,24 @@ def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kin
                   *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
                   hits.prim, hits.b1, hits.b2, vis, counters)
     return vis, counters.sum(axis=0)
+
+
+def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, packet=8,
+               any_hit=False) -> Hits:
+    """Closest (or any) hits of arbitrary rays, packet^2 consecutive rays per packet.
+    Directions need not be unit length; t is in units of the given direction."""
+    sub, _, _, threads = _layout(packet, packet, packet)
+    origins = np.ascontiguousarray(origins, np.float32)
+    dirs = np.ascontiguousarray(dirs, np.float32)
+    n = origins.shape[0]
+    t_min = np.zeros(n, np.float32) if t_min is None else np.ascontiguousarray(t_min, np.float32)
+    t_max = np.full(n, np.inf, np.float32) if t_max is None else np.ascontiguousarray(t_max, np.float32)
+    out_t = np.empty(n, np.float32)
+    out_prim = np.empty(n, np.int32)
+    out_b1 = np.empty(n, np.float32)
+    out_b2 = np.empty(n, np.float32)
+    counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
+    trace_ray_batch(origins, dirs, t_min, t_max, packet, sub, threads, any_hit,
+                    *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
+                    out_t, out_prim, out_b1, out_b2, counters)
+    return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))

@@ -2,6 +2,7 @@
 import numpy as np
 from numba import njit, prange
 
+from raycore.camera import primary_dir
 from raycore.triangle import intersect_ray
 
 
@@ -41,3 +42,18 @@ def camera_rays(cam, width, height, jitter=(0.5, 0.5)):
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(eye, d.shape)
     return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
+
+
+@njit(cache=True)
+def kernel_camera_rays(cam, width, height, jx, jy):
+    """The exact float32 rays the renderer casts (for traversal comparisons)."""
+    n = width * height
+    o = np.empty((n, 3), np.float32)
+    d = np.empty((n, 3), np.float32)
+    for y in range(height):
+        for x in range(width):
+            i = y * width + x
+            dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+            o[i, 0], o[i, 1], o[i, 2] = cam[0], cam[1], cam[2]
+            d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+    return o, d

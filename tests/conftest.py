@@ -1,0 +1,31 @@
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+def soup(rng, n, spread=4.0, size=0.3):
+    """Random triangle soup (n, 9) f32 in a cube of side `spread`."""
+    centres = rng.random((n, 1, 3)) * spread - spread / 2
+    tris = centres + rng.normal(size=(n, 3, 3)) * size
+    return np.ascontiguousarray(tris.reshape(n, 9), np.float32)
+
+
+def icosphere_mesh(level=2, radius=1.0):
+    sys.path.insert(0, str(ROOT / "assets"))
+    from make_demo import icosphere
+    v, f = icosphere(level, radius)
+    return v.astype(np.float32), f.astype(np.int32)
+
+
+def tri_verts_of(vertices, faces):
+    return np.ascontiguousarray(vertices[faces].reshape(-1, 9), np.float32)

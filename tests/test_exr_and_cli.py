@@ -1,0 +1,96 @@
+"""EXR round trip and the command line, through click's test runner."""
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.main import main
+from raycore.image_io import read_exr, write_exr
+
+DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
+
+
+def test_exr_round_trip_types_and_metadata(tmp_path):
+    h, w = 8, 6
+    rgba = np.random.default_rng(0).random((h, w, 4)).astype(np.float32)
+    z = np.linspace(1, 2, h * w, dtype=np.float32).reshape(h, w)
+    z[0, 0] = np.inf
+    path = tmp_path / "f.exr"
+    write_exr(str(path), {"R": rgba[..., 0], "G": rgba[..., 1], "B": rgba[..., 2], "A": rgba[..., 3],
+                          "Z": z, "id": np.full((h, w), 7, np.float32)},
+              {"frustrace:frame": 3, "frustrace:time": 0.125, "Software": "frustrace test"})
+    names, px, spec = read_exr(str(path))
+    assert names == ["R", "G", "B", "A", "Z", "id"]
+    assert [str(f) for f in spec.channelformats] == ["half"] * 4 + ["float"] * 2
+    assert np.array_equal(px[..., 4], z)                  # float32 kept exactly, inf included
+    np.testing.assert_allclose(px[..., :4], rgba, atol=1e-3)
+    assert spec.getattribute("frustrace:frame") == 3
+    assert abs(spec.getattribute("frustrace:time") - 0.125) < 1e-7
+    assert [p.name for p in tmp_path.iterdir()] == ["f.exr"]   # no temp file left
+
+
+@pytest.fixture
+def small_demo(tmp_path):
+    scene = tmp_path / "demo"
+    shutil.copytree(DEMO, scene)
+    text = (scene / "anim.yaml").read_text().replace("resolution: [512, 512]", "resolution: [48, 40], aovs: [N, id]")
+    (scene / "anim.yaml").write_text(text)
+    return scene / "anim.yaml"
+
+
+def test_render_writes_frames_and_stats(small_demo, tmp_path):
+    out = tmp_path / "frames"
+    res = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(out), "--frames", "2:3", "--quiet"])
+    assert res.exit_code == 0, res.output
+    names, px, spec = read_exr(str(out / "frame_0002.exr"))
+    assert names[:5] == ["R", "G", "B", "A", "Z"] and {"N.X", "N.Y", "N.Z", "id"} <= set(names)
+    a, z, ids = px[..., 3], px[..., 4], px[..., names.index("id")]
+    miss = a == 0
+    assert miss.any() and (~miss).any()
+    assert np.all(np.isinf(z[miss])) and np.all(ids[miss] == -1) and np.all(ids[~miss] >= 0)
+    assert spec.getattribute("frustrace:frame") == 2
+    stats = json.loads((out / "stats.json").read_text())
+    assert [f["frame"] for f in stats["frames"]] == [2, 3]
+    for key in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms", "tri_tests",
+                "mrays_per_s", "rays", "triangles"):
+        assert key in stats["frames"][0]
+    assert set(stats["summary"]) >= {"fps_raycast", "fps_full", "fps_wall", "compile_s"}
+    # existing frames are never overwritten unless asked
+    again = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(out), "--frames", "2:3", "--quiet"])
+    assert again.exit_code == 2 and "frame_0002.exr" in again.output and "--resume" in again.output
+    resumed = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(out), "--frames", "2:4", "--quiet", "--resume"])
+    assert resumed.exit_code == 0 and (out / "frame_0004.exr").exists()
+
+
+def test_bad_yaml_exits_2_with_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("version: 1\ncamera: {eye: [0, 0, 1], look_at: [0, 0, 0]\n")
+    res = CliRunner().invoke(main, ["check", str(bad)])
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and "bad.yaml" in lines[0] and "Traceback" not in res.output
+
+
+def test_unknown_key_is_named(small_demo):
+    text = small_demo.read_text().replace("shininess: 48", "shinyness: 48")
+    small_demo.write_text(text)
+    res = CliRunner().invoke(main, ["check", str(small_demo)])
+    assert res.exit_code == 2 and "materials.rubber.shinyness" in res.output and "unknown key" in res.output
+
+
+def test_missing_mesh_and_decreasing_key_times_are_named(small_demo):
+    original = small_demo.read_text()
+    small_demo.write_text(original.replace("tube_003.obj", "nope.obj"))
+    res = CliRunner().invoke(main, ["check", str(small_demo)])
+    assert res.exit_code == 2 and "objects.1.keyframes.3.mesh" in res.output and "nope.obj" in res.output
+    small_demo.write_text(original.replace("{t: 1.5, mesh: tube_003.obj}", "{t: 0.9, mesh: tube_003.obj}"))
+    res = CliRunner().invoke(main, ["check", str(small_demo)])
+    assert res.exit_code == 2 and "objects.1.keyframes.3" in res.output
+
+
+def test_check_summarises(small_demo):
+    res = CliRunner().invoke(main, ["check", str(small_demo)])
+    assert res.exit_code == 0 and "7330 triangles" in res.output and "deforming" in res.output
