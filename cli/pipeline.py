@@ -1,8 +1,12 @@
 """The render loop: anim (vertices at t) -> raycore (frame) -> EXR, per frame.
 
-Writing a frame (OpenImageIO, tens of ms) runs on a writer thread while the
-next frame renders; the numba kernels release the GIL. Compile time is
-measured apart by a small warm-up render and never mixed into fps.
+Writing a frame goes through a writer thread, but the render of the next frame
+waits for it (MAX_PENDING_WRITES = 0): on this 2-core machine kind the
+OpenImageIO write (150-250 ms per 1024^2 frame) holds a core, and numba's
+statically split parallel regions then stall on it, slowing the render phases
+by 2-50x, which costs more than the overlap gains. Raise the constant on
+machines with cores to spare. Compile time is measured apart by a small
+warm-up render and never mixed into fps.
 """
 import json
 import re
@@ -22,6 +26,7 @@ from raycore.image_io import read_texture, write_exr
 from raycore.mesh import vertex_face_csr
 
 VERSION = "0.1.0"
+MAX_PENDING_WRITES = 0
 
 
 def frame_path(pattern: str, frame: int) -> str:
@@ -123,6 +128,8 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = []
         for frame, path in todo:
+            while len(pending) > MAX_PENDING_WRITES:
+                pending.pop(0).result()
             t = scene.time_of(frame)
             t0 = time.perf_counter()
             vertices = scene.vertices_at(t)
@@ -143,8 +150,6 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
                    "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
             rows.append(row)
             pending.append(writer.submit(write, path, result, row))
-            while len(pending) > 2:            # back-pressure: at most 2 frames queued
-                pending.pop(0).result()
             if on_frame:
                 on_frame(row)
         for p in pending:

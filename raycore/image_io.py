@@ -12,6 +12,10 @@ import numpy as np
 import OpenImageIO as oiio
 
 HALF_CHANNELS = ("R", "G", "B", "A")
+# OpenImageIO's own pool would take every core while the next frame renders;
+# one thread keeps the writer on one core and leaves the rest to the kernels.
+oiio.attribute("threads", 1)
+oiio.attribute("exr_threads", 1)
 
 
 def write_exr(path: str, channels: dict, metadata: dict) -> None:
