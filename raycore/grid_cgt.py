@@ -18,6 +18,10 @@ The walk stops once every ray's closest hit (or exit) lies before the end of
 the current slice. Works for any origins (primary rays share one; shadow rays
 from surface points do not), since only the affine bounds are used.
 
+A packet is traced in two steps: a set-up fills the per-ray `work` rows and
+the frustum bounds (`setup_rays` for rays with any origins, or the camera's
+corner-ray set-up in tiles.py), then `walk` traverses the grid.
+
 Ray packets are SoA float32 arrays shaped (row, sub-packet j, ray r): every
 loop indexes them with loop counters that start at 0, which lets LLVM drop
 numba's negative-index wraparound and vectorize the per-ray loops (an index
@@ -33,9 +37,12 @@ F1 = np.float32(1.0)
 INF = np.float32(np.inf)
 # rows of the `rays` input array (8, n_sub, S*S)
 OX, OY, OZ, DX, DY, DZ, TMIN, TMAX = 0, 1, 2, 3, 4, 5, 6, 7
-# rows of the `work` scratch array (8, n_sub, S*S): permuted origin, shear, exit
-OU, OV, OK, SU, SV, SZ, DK, TEXIT = 0, 1, 2, 3, 4, 5, 6, 7
-# rows of the `sub` scratch array (8, n_sub): sub-packet frustum bounds
+# rows of the `work` array (9, n_sub, S*S): permuted origin, Woop shear, the
+# direction along K, the exit distance from the grid (-inf = ray not live) and t_min
+OU, OV, OK, SU, SV, SZ, DK, TEXIT, WTMIN = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_WORK = 9
+# rows of the `sub` array (8, n_sub + 1): frustum bounds of each sub-packet,
+# column n_sub holds the whole packet's
 UMIN, UMAX, GUMIN, GUMAX, VMIN, VMAX, GVMIN, GVMAX = 0, 1, 2, 3, 4, 5, 6, 7
 MAILBOX_SIZE = 256            # power of two; collisions only cost a re-test
 # counters (per tile): 0 packets, 1 cells visited, 2 ray-triangle tests,
@@ -68,6 +75,14 @@ def choose_major_axis(rays):
             mx2 = max(mx2, d2 if active else -INF)
     if n_active == 0:
         return -1, 0, 0
+    K, s = pick_axis(mn0, mn1, mn2, mx0, mx1, mx2)
+    return K, s, n_active
+
+
+@kernel
+def pick_axis(mn0, mn1, mn2, mx0, mx1, mx2):
+    """(axis, sign) from per-axis direction ranges: the axis whose range
+    excludes 0 with the largest margin; (-1, 0) if none does."""
     best = -1
     best_val = F0
     best_sign = 0
@@ -78,45 +93,44 @@ def choose_major_axis(rays):
             best, best_val, best_sign = a, mn[a], 1
         elif mx[a] < F0 and -mx[a] > best_val:
             best, best_val, best_sign = a, -mx[a], -1
-    return best, best_sign, n_active
+    return best, best_sign
 
 
 @kernel
-def _cull_plane(au, wa, bu, wb, cu, wc, g, bound, lower):
-    """True when all three vertices lie outside the plane u - g*w = bound
-    (below it for a lower bound, above it for an upper one)."""
-    if lower:
-        return (au - g * wa < bound) & (bu - g * wb < bound) & (cu - g * wc < bound)
-    return (au - g * wa > bound) & (bu - g * wb > bound) & (cu - g * wc > bound)
+def slab_exit(ox, oy, oz, ix, iy, iz, t0, t1, g_lo, g_hi):
+    """(t_enter, t_exit) of a ray in the grid box, branch-free: a zero
+    direction gives +-inf bounds, and a 0 * inf NaN (origin on a slab plane)
+    loses every min/max. Outside when t_enter > t_exit."""
+    xa = (g_lo[0] - ox) * ix
+    xb = (g_hi[0] - ox) * ix
+    ya = (g_lo[1] - oy) * iy
+    yb = (g_hi[1] - oy) * iy
+    za = (g_lo[2] - oz) * iz
+    zb = (g_hi[2] - oz) * iz
+    t0 = max(t0, min(xa, xb))
+    t1 = min(t1, max(xa, xb))
+    t0 = max(t0, min(ya, yb))
+    t1 = min(t1, max(ya, yb))
+    t0 = max(t0, min(za, zb))
+    t1 = min(t1, max(za, zb))
+    return t0, t1
 
 
 @kernel
-def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
-               sub, sub_active, sub_done, mailbox,
-               g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-               tri_verts, eps, counters, tile):
-    """Trace one packet. Fills hit_t/hit_prim/hit_b1/hit_b2 (n_sub, S*S) for
-    its rays (prim -1 = no hit before TMAX) and returns True, or returns
-    False when the rays share no major axis (hits then undefined)."""
+def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
+    """Set-up for rays with arbitrary origins (shadow rays, ray batches).
+
+    Returns (K, s, n_live, k_ref, w_end): major axis and its direction sign,
+    the rays inside the grid, the packet's entry plane along K and its
+    farthest exit in w. K = -1: no common axis (use single rays);
+    n_live = 0: nothing to trace."""
     n_sub = rays.shape[1]
     ss = rays.shape[2]
     K, s, n_active = choose_major_axis(rays)
-    for j in range(n_sub):
-        for r in range(ss):
-            hit_t[j, r] = rays[TMAX, j, r]
-            hit_prim[j, r] = -1
-    if n_active == 0:
-        return True
-    if K < 0:
-        return False
+    if n_active == 0 or K < 0:
+        return K, s, 0, F0, F0
     U = (K + 1) % 3
     V = (K + 2) % 3
-    counters[tile, 0] += 1
-
-    # --- per ray: permuted origin, Woop shear, clip to the grid -------------
-    lo_k = g_lo[K]
-    lo_x, lo_y, lo_z = g_lo[0], g_lo[1], g_lo[2]
-    hi_x, hi_y, hi_z = g_hi[0], g_hi[1], g_hi[2]
     k_first = INF
     k_last = -INF
     for j in range(n_sub):
@@ -131,56 +145,25 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
             work[SV, j, r] = rays[DX + V, j, r] * sz
             work[SZ, j, r] = sz
             work[DK, j, r] = dk
-            # slab clip, branch-free: a zero direction gives +-inf bounds, and a
-            # 0 * inf NaN (origin on a slab plane) loses every min/max below
-            t0 = rays[TMIN, j, r]
-            t1 = rays[TMAX, j, r]
-            ix = F1 / rays[DX, j, r]
-            iy = F1 / rays[DY, j, r]
-            iz = F1 / rays[DZ, j, r]
-            xa = (lo_x - rays[OX, j, r]) * ix
-            xb = (hi_x - rays[OX, j, r]) * ix
-            ya = (lo_y - rays[OY, j, r]) * iy
-            yb = (hi_y - rays[OY, j, r]) * iy
-            za = (lo_z - rays[OZ, j, r]) * iz
-            zb = (hi_z - rays[OZ, j, r]) * iz
-            t0 = max(t0, min(xa, xb))
-            t1 = min(t1, max(xa, xb))
-            t0 = max(t0, min(ya, yb))
-            t1 = min(t1, max(ya, yb))
-            t0 = max(t0, min(za, zb))
-            t1 = min(t1, max(za, zb))
+            work[WTMIN, j, r] = rays[TMIN, j, r]
+            t0, t1 = slab_exit(rays[OX, j, r], rays[OY, j, r], rays[OZ, j, r],
+                               F1 / rays[DX, j, r], F1 / rays[DY, j, r], F1 / rays[DZ, j, r],
+                               rays[TMIN, j, r], rays[TMAX, j, r], g_lo, g_hi)
             inside = t0 <= t1
             work[TEXIT, j, r] = t1 if inside else -INF
             k_first = min(k_first, (ok + t0 * dk) * s if inside else INF)
             k_last = max(k_last, (ok + t1 * dk) * s if inside else -INF)
     if k_first > k_last:               # no ray enters the grid
-        return True
+        return K, s, 0, F0, F0
     k_ref = k_first * s                # entry plane of the packet (w = 0)
     w_end = k_last - k_first           # farthest exit, in w
-
-    # --- frustum bounds of the whole packet and of each sub-packet ----------
-    pu0 = INF
-    pu1 = -INF
-    pgu0 = INF
-    pgu1 = -INF
-    pv0 = INF
-    pv1 = -INF
-    pgv0 = INF
-    pgv1 = -INF
     n_live = 0
     for j in range(n_sub):
-        u0 = INF
-        u1 = -INF
-        gu0 = INF
-        gu1 = -INF
-        v0 = INF
-        v1 = -INF
-        gv0 = INF
-        gv1 = -INF
+        u0 = v0 = gu0 = gv0 = INF
+        u1 = v1 = gu1 = gv1 = -INF
         live = 0
         for r in range(ss):
-            on = (work[TEXIT, j, r] >= rays[TMIN, j, r]) & (rays[TMAX, j, r] > rays[TMIN, j, r])
+            on = work[TEXIT, j, r] >= work[WTMIN, j, r]
             live += 1 if on else 0
             dk_ref = k_ref - work[OK, j, r]
             u = work[OU, j, r] + dk_ref * work[SU, j, r]
@@ -196,33 +179,83 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
             gv0 = min(gv0, gv if on else INF)
             gv1 = max(gv1, gv if on else -INF)
         sub_active[j] = live
-        sub_done[j] = 0
-        sub[UMIN, j] = u0 - eps
-        sub[UMAX, j] = u1 + eps
-        sub[GUMIN, j] = gu0
-        sub[GUMAX, j] = gu1
-        sub[VMIN, j] = v0 - eps
-        sub[VMAX, j] = v1 + eps
-        sub[GVMIN, j] = gv0
-        sub[GVMAX, j] = gv1
         n_live += live
-        if live > 0:
-            pu0 = min(pu0, u0)
-            pu1 = max(pu1, u1)
-            pv0 = min(pv0, v0)
-            pv1 = max(pv1, v1)
-            pgu0 = min(pgu0, gu0)
-            pgu1 = max(pgu1, gu1)
-            pgv0 = min(pgv0, gv0)
-            pgv1 = max(pgv1, gv1)
-    pu0 -= eps
-    pu1 += eps
-    pv0 -= eps
-    pv1 += eps
+        set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps)
+    packet_bounds(sub, sub_active)
+    return K, s, n_live, k_ref, w_end
+
+
+@kernel
+def set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps):
+    """Store the frustum bounds of sub-packet j, loosened by eps."""
+    sub[UMIN, j] = u0 - eps
+    sub[UMAX, j] = u1 + eps
+    sub[GUMIN, j] = gu0
+    sub[GUMAX, j] = gu1
+    sub[VMIN, j] = v0 - eps
+    sub[VMAX, j] = v1 + eps
+    sub[GVMIN, j] = gv0
+    sub[GVMAX, j] = gv1
+
+
+@kernel
+def packet_bounds(sub, sub_active):
+    """Column n_sub = union of the bounds of the sub-packets with live rays."""
+    n_sub = sub_active.shape[0]
+    for row in (UMIN, GUMIN, VMIN, GVMIN):
+        sub[row, n_sub] = INF
+    for row in (UMAX, GUMAX, VMAX, GVMAX):
+        sub[row, n_sub] = -INF
+    for j in range(n_sub):
+        if sub_active[j] > 0:
+            for row in (UMIN, GUMIN, VMIN, GVMIN):
+                sub[row, n_sub] = min(sub[row, n_sub], sub[row, j])
+            for row in (UMAX, GUMAX, VMAX, GVMAX):
+                sub[row, n_sub] = max(sub[row, n_sub], sub[row, j])
+
+
+@kernel
+def _cull_plane(au, wa, bu, wb, cu, wc, g, bound, lower):
+    """True when all three vertices lie outside the plane u - g*w = bound
+    (below it for a lower bound, above it for an upper one)."""
+    if lower:
+        return (au - g * wa < bound) & (bu - g * wb < bound) & (cu - g * wc < bound)
+    return (au - g * wa > bound) & (bu - g * wb > bound) & (cu - g * wc > bound)
+
+
+@kernel
+def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
+    """Triangle outside one of the four side planes of frustum column j."""
+    return (_cull_plane(au, wa, bu, wb, cu, wc, sub[GUMIN, j], sub[UMIN, j], True)
+            or _cull_plane(au, wa, bu, wb, cu, wc, sub[GUMAX, j], sub[UMAX, j], False)
+            or _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMIN, j], sub[VMIN, j], True)
+            or _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False))
+
+
+@kernel
+def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_end,
+         sub, sub_active, sub_done, mailbox,
+         g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile):
+    """Walk the grid slice by slice along K for a set-up packet, updating the
+    closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry)."""
+    n_sub = work.shape[1]
+    ss = work.shape[2]
+    U = (K + 1) % 3
+    V = (K + 2) % 3
+    counters[tile, 0] += 1
+    for j in range(n_sub):
+        sub_done[j] = 0
     for m in range(MAILBOX_SIZE):
         mailbox[m] = -1
-
-    # --- walk the slices along K ---------------------------------------------
+    pu0 = sub[UMIN, n_sub]
+    pu1 = sub[UMAX, n_sub]
+    pgu0 = sub[GUMIN, n_sub]
+    pgu1 = sub[GUMAX, n_sub]
+    pv0 = sub[VMIN, n_sub]
+    pv1 = sub[VMAX, n_sub]
+    pgv0 = sub[GVMIN, n_sub]
+    pgv1 = sub[GVMAX, n_sub]
+    lo_k = g_lo[K]
     nK = g_dims[K]
     nU = g_dims[U]
     nV = g_dims[V]
@@ -231,7 +264,7 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
     sU = stride[U]
     sV = stride[V]
     q = min(max(int(np.floor((k_ref - lo_k) * g_inv[K])), 0), nK - 1)
-    q_last = min(max(int(np.floor((k_last * s - lo_k) * g_inv[K])), 0), nK - 1)
+    q_last = min(max(int(np.floor((k_ref + s * w_end - lo_k) * g_inv[K])), 0), nK - 1)
     n_slices = (q_last - q) * s + 1
     for _ in range(n_slices):
         k_lo = lo_k + q * g_cell[K]
@@ -278,19 +311,13 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
                         if max(wa, wb, wc) < -eps or min(wa, wb, wc) > w_end + eps:
                             continue
                         # packet frustum: all vertices outside one plane -> cull
-                        if (_cull_plane(au, wa, bu, wb, cu, wc, pgu0, pu0, True)
-                                or _cull_plane(au, wa, bu, wb, cu, wc, pgu1, pu1, False)
-                                or _cull_plane(av, wa, bv, wb, cv, wc, pgv0, pv0, True)
-                                or _cull_plane(av, wa, bv, wb, cv, wc, pgv1, pv1, False)):
+                        if _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, n_sub):
                             continue
                         counters[tile, 3] += 1
                         for j in range(n_sub):
                             if sub_done[j] >= sub_active[j]:
                                 continue
-                            if (_cull_plane(au, wa, bu, wb, cu, wc, sub[GUMIN, j], sub[UMIN, j], True)
-                                    or _cull_plane(au, wa, bu, wb, cu, wc, sub[GUMAX, j], sub[UMAX, j], False)
-                                    or _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMIN, j], sub[VMIN, j], True)
-                                    or _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False)):
+                            if n_sub > 1 and _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
                                 continue
                             counters[tile, 2] += ss
                             # branch-free ray loop: vectorized across the sub-packet
@@ -303,7 +330,7 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
                                     bu - ou, bv - ov, bk - ok,
                                     cu - ou, cv - ov, ck - ok,
                                     work[SU, j, r], work[SV, j, r], work[SZ, j, r])
-                                better = hit & (t > rays[TMIN, j, r]) & (t < hit_t[j, r])
+                                better = hit & (t > work[WTMIN, j, r]) & (t < hit_t[j, r])
                                 hit_t[j, r] = t if better else hit_t[j, r]
                                 hit_b1[j, r] = b1 if better else hit_b1[j, r]
                                 hit_b2[j, r] = b2 if better else hit_b2[j, r]
@@ -316,11 +343,10 @@ def cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
                 t_far = min(hit_t[j, r], work[TEXIT, j, r])
                 w_far = (work[OK, j, r] + t_far * work[DK, j, r] - k_ref) * s
                 fin = (w_far <= w1) | (any_hit & (hit_prim[j, r] >= 0))
-                live = (work[TEXIT, j, r] >= rays[TMIN, j, r]) & (rays[TMAX, j, r] > rays[TMIN, j, r])
+                live = work[TEXIT, j, r] >= work[WTMIN, j, r]
                 dj += 1 if (fin & live) else 0
             sub_done[j] = dj
             done += dj
         if done >= n_live:
             break
         q += s
-    return True

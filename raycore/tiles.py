@@ -13,8 +13,9 @@ from numba import prange
 
 from ._jit import fetch_add, kernel, parallel_kernel
 from .camera import primary_dir
-from .grid_cgt import (DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, OX, OY, OZ, TMAX, TMIN,
-                       cgt_packet)
+from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_WORK, OK, OU, OV,
+                       OX, OY, OZ, SU, SV, SZ, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
+                       pick_axis, set_bounds, setup_rays, slab_exit, walk)
 from .grid_dda import dda_trace
 from .triangle import surface_point
 
@@ -53,16 +54,25 @@ def _ray_offsets(sub_size):
 
 
 @kernel
-def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub, sub_active, sub_done, mailbox,
-                       g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                       tri_verts, eps, counters, tile):
-    """CGT for the packet, or single-ray DDA for each ray if it has no common
-    major axis (rays pointing to both sides of every axis)."""
-    ok = cgt_packet(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub, sub_active, sub_done, mailbox,
-                    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                    tri_verts, eps, counters, tile)
-    if ok:
-        return
+def _scratch(packet, sub_size):
+    """One thread's packet scratch: rays (8, n_sub, ss), work (N_WORK, n_sub,
+    ss), hit t/b1/b2/prim (n_sub, ss), sub bounds (8, n_sub + 1), sub-packet
+    live and done counts, mailbox."""
+    ss = sub_size * sub_size
+    n_sub = packet * packet // ss
+    return (np.empty((8, n_sub, ss), np.float32), np.empty((N_WORK, n_sub, ss), np.float32),
+            np.empty((n_sub, ss), np.float32), np.zeros((n_sub, ss), np.float32),
+            np.zeros((n_sub, ss), np.float32), np.empty((n_sub, ss), np.int32),
+            np.empty((8, n_sub + 1), np.float32), np.empty(n_sub, np.int32),
+            np.empty(n_sub, np.int32), np.empty(MAILBOX_SIZE, np.int32))
+
+
+@kernel
+def _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
+                g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
+                counters, tile):
+    """Single-ray DDA for every active ray of a packet that has no common
+    major axis (its rays point to both sides of every axis)."""
     for j in range(rays.shape[1]):
         for r in range(rays.shape[2]):
             hit_t[j, r] = rays[TMAX, j, r]
@@ -82,6 +92,165 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
                 counters[tile, 4] += 1
 
 
+@kernel
+def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub,
+                       sub_active, sub_done, mailbox,
+                       g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
+                       tri_verts, eps, counters, tile):
+    """CGT for a packet of arbitrary rays, or single-ray DDA when the rays
+    share no major axis. Fills hit_* (prim -1: nothing before TMAX)."""
+    for j in range(rays.shape[1]):
+        for r in range(rays.shape[2]):
+            hit_t[j, r] = rays[TMAX, j, r]
+            hit_prim[j, r] = -1
+    K, s, n_live, k_ref, w_end = setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps)
+    if K < 0:
+        _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, g_lo, g_hi, g_dims,
+                    g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
+    elif n_live > 0:
+        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_end,
+             sub, sub_active, sub_done, mailbox, g_lo, g_dims, g_cell, g_inv,
+             cell_start, cell_tris, tri_verts, eps, counters, tile)
+
+
+@kernel
+def _camera_rays(rays, cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y):
+    """The packet's camera rays as general rays (for the DDA fallback)."""
+    for j in range(rays.shape[1]):
+        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+        for r in range(rays.shape[2]):
+            x = x0 + off_x[r]
+            y = y0 + off_y[r]
+            dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+            rays[OX, j, r] = cam[0]
+            rays[OY, j, r] = cam[1]
+            rays[OZ, j, r] = cam[2]
+            rays[DX, j, r] = dx
+            rays[DY, j, r] = dy
+            rays[DZ, j, r] = dz
+            rays[TMIN, j, r] = F0
+            rays[TMAX, j, r] = INF if (x < width) & (y < height) else -F1
+
+
+@kernel
+def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
+                 work, hit_t, hit_prim, sub, sub_active, g_lo, g_hi, eps):
+    """Corner-ray set-up of a camera packet (MLRTA-style, Reshetov et al. 2005).
+
+    All rays leave the eye and their unnormalised directions are affine in
+    the pixel position, so each direction component, and each slope d_u/d_k,
+    takes its extremes at the corner rays of a (sub-)packet: the major axis
+    and the frustum bounds come from 4 rays instead of all of them. Rays start
+    at the eye, so the packet's entry plane is the eye's K coordinate clamped
+    into the grid. Returns (K, s, n_live, k_ref, w_end) like setup_rays."""
+    n_sub = work.shape[1]
+    ss = work.shape[2]
+    for j in range(n_sub):
+        for r in range(ss):
+            hit_t[j, r] = INF
+            hit_prim[j, r] = -1
+    # major axis from the 4 corner rays of the whole packet
+    mn0 = mn1 = mn2 = INF
+    mx0 = mx1 = mx2 = -INF
+    for c in range(4):
+        dx, dy, dz = primary_dir(cam, px + (packet - 1) * (c & 1), py + (packet - 1) * (c >> 1), jx, jy)
+        mn0, mn1, mn2 = min(mn0, dx), min(mn1, dy), min(mn2, dz)
+        mx0, mx1, mx2 = max(mx0, dx), max(mx1, dy), max(mx2, dz)
+    K, s = pick_axis(mn0, mn1, mn2, mx0, mx1, mx2)
+    if K < 0:
+        return K, s, 0, F0, F0
+    U = (K + 1) % 3
+    V = (K + 2) % 3
+    ok = cam[K]
+    ou = cam[U]
+    ov = cam[V]
+    if s > 0:
+        k_ref = max(ok, g_lo[K])
+        w_end = g_hi[K] - k_ref
+    else:
+        k_ref = min(ok, g_hi[K])
+        w_end = k_ref - g_lo[K]
+    if not w_end >= F0:                # the eye is past the grid along K
+        return K, s, 0, F0, F0
+    ix_e = F1 if K == 0 else F0        # one-hot selectors: branch-free permutation
+    iy_e = F1 if K == 1 else F0
+    iz_e = F1 if K == 2 else F0
+    ux_e = F1 if U == 0 else F0
+    uy_e = F1 if U == 1 else F0
+    uz_e = F1 if U == 2 else F0
+    vx_e = F1 if V == 0 else F0
+    vy_e = F1 if V == 1 else F0
+    vz_e = F1 if V == 2 else F0
+    ex, ey, ez = cam[0], cam[1], cam[2]
+    f0, f1, f2 = cam[3], cam[4], cam[5]
+    r0, r1, r2 = cam[6], cam[7], cam[8]
+    q0, q1, q2 = cam[9], cam[10], cam[11]
+    c12, c13, c14, c15 = cam[12], cam[13], cam[14], cam[15]
+    lo_x, lo_y, lo_z = g_lo[0], g_lo[1], g_lo[2]
+    hi_x, hi_y, hi_z = g_hi[0], g_hi[1], g_hi[2]
+    n_live = 0
+    for j in range(n_sub):
+        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+        u0 = v0 = gu0 = gv0 = INF
+        u1 = v1 = gu1 = gv1 = -INF
+        for c in range(4):
+            dx, dy, dz = primary_dir(cam, x0 + (sub_size - 1) * (c & 1),
+                                     y0 + (sub_size - 1) * (c >> 1), jx, jy)
+            dk = dx * ix_e + dy * iy_e + dz * iz_e
+            su = (dx * ux_e + dy * uy_e + dz * uz_e) / dk
+            sv = (dx * vx_e + dy * vy_e + dz * vz_e) / dk
+            u = ou + (k_ref - ok) * su
+            v = ov + (k_ref - ok) * sv
+            u0, u1 = min(u0, u), max(u1, u)
+            v0, v1 = min(v0, v), max(v1, v)
+            gu0, gu1 = min(gu0, su * s), max(gu1, su * s)
+            gv0, gv1 = min(gv0, sv * s), max(gv1, sv * s)
+        set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps)
+        live = 0
+        # per-ray loop over scalars only (no loads of cam/grid inside), so that
+        # LLVM needs no alias checks and vectorizes it
+        for r in range(ss):
+            x = x0 + off_x[r]
+            y = y0 + off_y[r]
+            cu = (np.float32(x) + jx) * c14 - c12
+            cv = c13 - (np.float32(y) + jy) * c15
+            dx = f0 + cu * r0 + cv * q0
+            dy = f1 + cu * r1 + cv * q1
+            dz = f2 + cu * r2 + cv * q2
+            inv = F1 / np.sqrt(dx * dx + dy * dy + dz * dz)
+            dx *= inv
+            dy *= inv
+            dz *= inv
+            dk = dx * ix_e + dy * iy_e + dz * iz_e
+            sz = F1 / dk
+            work[OU, j, r] = ou
+            work[OV, j, r] = ov
+            work[OK, j, r] = ok
+            work[SU, j, r] = (dx * ux_e + dy * uy_e + dz * uz_e) * sz
+            work[SV, j, r] = (dx * vx_e + dy * vy_e + dz * vz_e) * sz
+            work[SZ, j, r] = sz
+            work[DK, j, r] = dk
+            work[WTMIN, j, r] = F0
+            ix = F1 / dx
+            iy = F1 / dy
+            iz = F1 / dz
+            xa = (lo_x - ex) * ix
+            xb = (hi_x - ex) * ix
+            ya = (lo_y - ey) * iy
+            yb = (hi_y - ey) * iy
+            za = (lo_z - ez) * iz
+            zb = (hi_z - ez) * iz
+            t0 = max(max(F0, min(xa, xb)), max(min(ya, yb), min(za, zb)))
+            t1 = min(min(max(xa, xb), max(ya, yb)), max(za, zb))
+            on = (x < width) & (y < height) & (t0 <= t1)
+            work[TEXIT, j, r] = t1 if on else -INF
+            live += 1 if on else 0
+        sub_active[j] = live
+        n_live += live
+    packet_bounds(sub, sub_active)
+    return K, s, n_live, k_ref, w_end
+
+
 @parallel_kernel
 def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
@@ -98,16 +267,8 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays = np.empty((8, n_sub, ss), np.float32)
-        work = np.empty((8, n_sub, ss), np.float32)
-        hit_t = np.empty((n_sub, ss), np.float32)
-        hit_b1 = np.zeros((n_sub, ss), np.float32)
-        hit_b2 = np.zeros((n_sub, ss), np.float32)
-        hit_prim = np.empty((n_sub, ss), np.int32)
-        sub = np.empty((8, n_sub), np.float32)
-        sub_active = np.empty(n_sub, np.int32)
-        sub_done = np.empty(n_sub, np.int32)
-        mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, mailbox = \
+            _scratch(packet, sub_size)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
             tile = fetch_add(next_tile, 0, 1)
@@ -117,24 +278,19 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             ty0 = (tile // tiles_x) * tile_size
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
-                    for j in range(n_sub):
-                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
-                        for r in range(ss):
-                            x = x0 + off_x[r]
-                            y = y0 + off_y[r]
-                            dx, dy, dz = primary_dir(cam, x, y, jx, jy)
-                            rays[OX, j, r] = cam[0]
-                            rays[OY, j, r] = cam[1]
-                            rays[OZ, j, r] = cam[2]
-                            rays[DX, j, r] = dx
-                            rays[DY, j, r] = dy
-                            rays[DZ, j, r] = dz
-                            rays[TMIN, j, r] = F0
-                            rays[TMAX, j, r] = INF if (x < width) & (y < height) else -F1
-                    _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, False,
-                                       sub, sub_active, sub_done, mailbox,
-                                       g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                                       tri_verts, eps, counters, tile)
+                    K, s, n_live, k_ref, w_end = setup_camera(
+                        cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
+                        work, hit_t, hit_prim, sub, sub_active, g_lo, g_hi, eps)
+                    if K < 0:
+                        _camera_rays(rays, cam, px, py, packet, sub_size, width, height,
+                                     jx, jy, off_x, off_y)
+                        _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, False, g_lo, g_hi,
+                                    g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
+                                    counters, tile)
+                    elif n_live > 0:
+                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, K, s, n_live,
+                             k_ref, w_end, sub, sub_active, sub_done, mailbox, g_lo, g_dims,
+                             g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
                     for j in range(n_sub):
                         x0, y0 = _sub_corner(px, py, j, packet, sub_size)
                         for r in range(ss):
@@ -218,16 +374,8 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays = np.empty((8, n_sub, ss), np.float32)
-        work = np.empty((8, n_sub, ss), np.float32)
-        hit_t = np.empty((n_sub, ss), np.float32)
-        occ_b1 = np.zeros((n_sub, ss), np.float32)
-        occ_b2 = np.zeros((n_sub, ss), np.float32)
-        occ_prim = np.empty((n_sub, ss), np.int32)
-        sub = np.empty((8, n_sub), np.float32)
-        sub_active = np.empty(n_sub, np.int32)
-        sub_done = np.empty(n_sub, np.int32)
-        mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        rays, work, hit_t, occ_b1, occ_b2, occ_prim, sub, sub_active, sub_done, mailbox = \
+            _scratch(packet, sub_size)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
             tile = fetch_add(next_tile, 0, 1)
@@ -270,16 +418,8 @@ def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, an
     n_packets = (n + per_packet - 1) // per_packet
     next_packet = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays = np.empty((8, n_sub, ss), np.float32)
-        work = np.empty((8, n_sub, ss), np.float32)
-        hit_t = np.empty((n_sub, ss), np.float32)
-        hit_b1 = np.zeros((n_sub, ss), np.float32)
-        hit_b2 = np.zeros((n_sub, ss), np.float32)
-        hit_prim = np.empty((n_sub, ss), np.int32)
-        sub = np.empty((8, n_sub), np.float32)
-        sub_active = np.empty(n_sub, np.int32)
-        sub_done = np.empty(n_sub, np.int32)
-        mailbox = np.empty(MAILBOX_SIZE, np.int32)
+        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, mailbox = \
+            _scratch(packet, sub_size)
         while True:
             pk = fetch_add(next_packet, 0, 1)
             if pk >= n_packets:
