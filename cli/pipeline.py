@@ -21,7 +21,7 @@ import numpy as np
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.frame import CameraPose, Geometry, Shading, render_frame
+from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
 from raycore.image_io import read_texture, write_exr
 from raycore.mesh import vertex_face_csr
 
@@ -124,6 +124,7 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
         with lock:
             row["write_ms"] = (time.perf_counter() - t0) * 1e3
 
+    buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0])
     wall0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = []
@@ -135,9 +136,10 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
             vertices = scene.vertices_at(t)
             eye, look_at, up, fov = scene.camera_at(t)
             interp_ms = (time.perf_counter() - t0) * 1e3
-            # the writer thread may still read the previous frame's arrays; a
-            # frame's result is fresh memory, so nothing is overwritten under it
-            result = render_frame(geometry(vertices), shading, CameraPose(eye, look_at, up, fov), cfg)
+            # a frame's images are fresh arrays (only work buffers are reused),
+            # so the writer thread never sees them overwritten
+            result = render_frame(geometry(vertices), shading, CameraPose(eye, look_at, up, fov), cfg,
+                                  buffers)
             tm = result.timings
             rays = result.counters["rays"]
             row = {"frame": frame, "time": t, "triangles": int(scene.faces.shape[0]), "rays": rays,

@@ -21,6 +21,10 @@ SAFE_FASTMATH = {"arcp", "nsz"}
 ARITH_FASTMATH = {"contract", "arcp", "nsz"}   # for kernels without edge tests
 
 kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMATH)
+# Small helpers that take arrays and run per ray, triangle or pixel: inlined at
+# numba-IR level. A real call costs an atomic incref/decref per array argument
+# (NRT reference counting), measured at 22% of traversal time before this.
+helper = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMATH, inline="always")
 parallel_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                        fastmath=SAFE_FASTMATH)
 arith_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)

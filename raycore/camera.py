@@ -1,7 +1,7 @@
 """Pinhole camera rays exactly as ../shared/SPEC.md section 3 fixes them."""
 import numpy as np
 
-from ._jit import kernel
+from ._jit import helper, kernel
 
 
 def camera_basis(eye, look_at, up, fov_deg, width, height):
@@ -22,7 +22,7 @@ def camera_basis(eye, look_at, up, fov_deg, width, height):
     return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height]]).astype(np.float32)
 
 
-@kernel
+@helper
 def primary_dir(cam, x, y, jx, jy):
     """Unit direction through pixel (x, y) at sub-pixel offset (jx, jy) in [0,1)
     (0.5, 0.5 = pixel centre); y counts from the top. SPEC's

@@ -15,7 +15,7 @@ from .config import RenderConfig
 from .grid_build import build_grid
 from .mesh import gather_triangles, vertex_normals
 from .shade import shade_pixels
-from .trace import trace_camera, trace_light
+from .trace import hit_buffers, trace_camera, trace_light
 
 
 class Geometry(NamedTuple):
@@ -66,8 +66,27 @@ def sample_offsets(spp: int) -> list:
     return out
 
 
-def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig) -> FrameResult:
+class FrameBuffers:
+    """Per-pixel work arrays kept from frame to frame (same resolution): fresh
+    large arrays cost page faults on every frame."""
+
+    def __init__(self, width, height, n_lights):
+        n = width * height
+        self.size = (width, height, n_lights)
+        self.hits = hit_buffers(n)
+        self.vis = np.empty((n_lights, n), np.float32)
+        self.rgba = np.empty((n, 4), np.float32)
+        self.z = np.empty(n, np.float32)
+
+
+def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
+                 buffers: FrameBuffers = None) -> FrameResult:
+    """Render one frame. Pass the same `buffers` for consecutive frames to
+    reuse work arrays; the returned images are always fresh arrays."""
     W, H = cfg.width, cfg.height
+    n_lights = shading.lights.shape[0]
+    if buffers is None or buffers.size != (W, H, n_lights):
+        buffers = FrameBuffers(W, H, n_lights)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
     t0 = time.perf_counter()
@@ -84,20 +103,19 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)
     bg = np.asarray(cfg.background, np.float32)
-    n_lights = shading.lights.shape[0]
     cast_shadows = cfg.shadows and n_lights > 0 and geom.faces.shape[0] > 0
     want_aov = any(a in cfg.aovs for a in ("N", "P"))
     acc_rgba = np.zeros((H * W, 4), np.float32)
     z = np.full(H * W, np.inf, np.float32)
-    rgba = np.empty((H * W, 4), np.float32)
-    z_s = np.empty(H * W, np.float32)
+    rgba = buffers.rgba
+    z_s = buffers.z
     aov_n = np.empty((H * W if want_aov else 0, 3), np.float32)
     aov_p = np.empty_like(aov_n)
     first_prim = None
     offsets = sample_offsets(cfg.spp)
     for jitter in offsets:
         t0 = time.perf_counter()
-        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter)
+        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.hits)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         counters["rays"] += W * H
         counters["cells"] += int(hits.counters[1])
@@ -105,12 +123,12 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["fallback_rays"] += int(hits.counters[4])
 
         t0 = time.perf_counter()
-        vis = np.empty((n_lights if cast_shadows else 0, H * W), np.float32)
+        vis = buffers.vis if cast_shadows else buffers.vis[:0]
         if cast_shadows:
             for li in range(n_lights):
                 kind = int(shading.lights[li, 0])
-                vis[li], c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
-                                         shading.lights[li, 1:4], cfg.packet, jitter)
+                _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
+                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li])
                 counters["shadow_rays"] += int(np.count_nonzero(hits.prim >= 0))
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])
@@ -121,12 +139,12 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                      hits.t, hits.prim, hits.b1, hits.b2, tri_verts, geom.faces, normals,
                      geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
                      shading.tex_info, shading.lights, vis, cast_shadows, bg,
-                     np.float32(cfg.ambient), rgba, z_s, want_aov and first_prim is None,
+                     np.float32(cfg.ambient), rgba, z_s, want_aov and jitter == offsets[0],
                      aov_n, aov_p)
         acc_rgba += rgba
         np.minimum(z, z_s, out=z)
-        if first_prim is None:
-            first_prim = hits.prim
+        if first_prim is None and "id" in cfg.aovs:
+            first_prim = hits.prim.copy()
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
     if len(offsets) > 1:
         acc_rgba /= len(offsets)

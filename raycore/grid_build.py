@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from ._jit import kernel, parallel_arith_kernel
+from ._jit import helper, kernel, parallel_arith_kernel
 from .config import EPS_GRID_REL
 
 MAX_CELLS = 1 << 24
@@ -108,7 +108,7 @@ def grid_dims(extent: np.ndarray, n_tris: int, density: float) -> np.ndarray:
     return dims.astype(np.int32)
 
 
-@kernel
+@helper
 def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
     """Write ranges[t] = inclusive cell index range of triangle t's widened
     bbox, or an empty range (x0 > x1) if a coordinate is not finite."""

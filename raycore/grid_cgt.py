@@ -29,7 +29,7 @@ like `base + r` instead measured 3-4x slower).
 """
 import numpy as np
 
-from ._jit import kernel
+from ._jit import helper, kernel
 from .triangle import woop_test
 
 F0 = np.float32(0.0)
@@ -37,10 +37,13 @@ F1 = np.float32(1.0)
 INF = np.float32(np.inf)
 # rows of the `rays` input array (8, n_sub, S*S)
 OX, OY, OZ, DX, DY, DZ, TMIN, TMAX = 0, 1, 2, 3, 4, 5, 6, 7
-# rows of the `work` array (9, n_sub, S*S): permuted origin, Woop shear, the
-# direction along K, the exit distance from the grid (-inf = ray not live) and t_min
-OU, OV, OK, SU, SV, SZ, DK, TEXIT, WTMIN = 0, 1, 2, 3, 4, 5, 6, 7, 8
-N_WORK = 9
+# rows of the `work` array (11, n_sub, S*S): permuted origin, Woop shear, the
+# permuted direction (DU, DV, DK), the exit distance from the grid (-inf = ray
+# not live) and t_min. The walk only reads it: a store into it inside the ray
+# loop would stop LLVM from vectorizing that loop (it cannot prove the rows
+# disjoint). DU and DV are filled only for shared-origin (camera) packets.
+OU, OV, OK, SU, SV, SZ, DK, TEXIT, WTMIN, DU, DV = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
+N_WORK = 11
 # rows of the `sub` array (8, n_sub + 1): frustum bounds of each sub-packet,
 # column n_sub holds the whole packet's
 UMIN, UMAX, GUMIN, GUMAX, VMIN, VMAX, GVMIN, GVMAX = 0, 1, 2, 3, 4, 5, 6, 7
@@ -96,7 +99,7 @@ def pick_axis(mn0, mn1, mn2, mx0, mx1, mx2):
     return best, best_sign
 
 
-@kernel
+@helper
 def slab_exit(ox, oy, oz, ix, iy, iz, t0, t1, g_lo, g_hi):
     """(t_enter, t_exit) of a ray in the grid box, branch-free: a zero
     direction gives +-inf bounds, and a 0 * inf NaN (origin on a slab plane)
@@ -185,7 +188,7 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
     return K, s, n_live, k_ref, w_end
 
 
-@kernel
+@helper
 def set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps):
     """Store the frustum bounds of sub-packet j, loosened by eps."""
     sub[UMIN, j] = u0 - eps
@@ -198,7 +201,7 @@ def set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps):
     sub[GVMAX, j] = gv1
 
 
-@kernel
+@helper
 def packet_bounds(sub, sub_active):
     """Column n_sub = union of the bounds of the sub-packets with live rays."""
     n_sub = sub_active.shape[0]
@@ -223,7 +226,7 @@ def _cull_plane(au, wa, bu, wb, cu, wc, g, bound, lower):
     return (au - g * wa > bound) & (bu - g * wb > bound) & (cu - g * wc > bound)
 
 
-@kernel
+@helper
 def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
     """Triangle outside one of the four side planes of frustum column j."""
     return (_cull_plane(au, wa, bu, wb, cu, wc, sub[GUMIN, j], sub[UMIN, j], True)
@@ -233,16 +236,29 @@ def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
 
 
 @kernel
-def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_end,
+def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_live, k_ref, w_end,
          sub, sub_active, sub_done, mailbox,
          g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile):
     """Walk the grid slice by slice along K for a set-up packet, updating the
-    closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry)."""
+    closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry).
+
+    shared_origin: every ray starts at work[OU/OV/OK, 0, 0] (camera packets).
+    The triangle is then tested through its three edge planes through that
+    origin, computed once per triangle: per ray only three dot products,
+    about half the work of the per-ray Woop shear. It is watertight for the
+    same reason: a shared edge's plane normal is the exact negative of its
+    neighbour's (cross products without FMA contraction), and zero is inclusive.
+    The distance comes from the triangle's plane (normal from its edges).
+    """
     n_sub = work.shape[1]
     ss = work.shape[2]
     U = (K + 1) % 3
     V = (K + 2) % 3
-    counters[tile, 0] += 1
+    # counters live in scalars: a store to the counters array inside the loops
+    # could alias every other array, forcing LLVM to reload them all
+    n_cells = 0
+    n_tests = 0
+    n_cand = 0
     for j in range(n_sub):
         sub_done[j] = 0
     for m in range(MAILBOX_SIZE):
@@ -255,6 +271,9 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_
     pv1 = sub[VMAX, n_sub]
     pgv0 = sub[GVMIN, n_sub]
     pgv1 = sub[GVMAX, n_sub]
+    e_u = work[OU, 0, 0]
+    e_v = work[OV, 0, 0]
+    e_k = work[OK, 0, 0]
     lo_k = g_lo[K]
     nK = g_dims[K]
     nU = g_dims[U]
@@ -288,7 +307,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_
             for iv in range(iv0, iv1 + 1):
                 for iu in range(iu0, iu1 + 1):
                     cell = q * sK + iu * sU + iv * sV
-                    counters[tile, 1] += 1
+                    n_cells += 1
                     for jj in range(cell_start[cell], cell_start[cell + 1]):
                         tri = cell_tris[jj]
                         slot = tri & (MAILBOX_SIZE - 1)
@@ -313,13 +332,57 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_
                         # packet frustum: all vertices outside one plane -> cull
                         if _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, n_sub):
                             continue
-                        counters[tile, 3] += 1
+                        n_cand += 1
+                        if shared_origin:
+                            # edge planes through the eye: n0 = b x c, n1 = c x a, n2 = a x b
+                            xu, xv, xk = au - e_u, av - e_v, ak - e_k
+                            yu, yv, yk = bu - e_u, bv - e_v, bk - e_k
+                            zu, zv, zk = cu - e_u, cv - e_v, ck - e_k
+                            n0u = yv * zk - yk * zv
+                            n0v = yk * zu - yu * zk
+                            n0k = yu * zv - yv * zu
+                            n1u = zv * xk - zk * xv
+                            n1v = zk * xu - zu * xk
+                            n1k = zu * xv - zv * xu
+                            n2u = xv * yk - xk * yv
+                            n2v = xk * yu - xu * yk
+                            n2k = xu * yv - xv * yu
+                            # distance from the triangle's own plane: its normal
+                            # from edges is well conditioned, unlike the sum of
+                            # the edge-plane normals for small, far triangles
+                            e1u, e1v, e1k = bu - au, bv - av, bk - ak
+                            e2u, e2v, e2k = cu - au, cv - av, ck - ak
+                            pnu = e1v * e2k - e1k * e2v
+                            pnv = e1k * e2u - e1u * e2k
+                            pnk = e1u * e2v - e1v * e2u
+                            t_num = xu * pnu + xv * pnv + xk * pnk
                         for j in range(n_sub):
-                            if sub_done[j] >= sub_active[j]:
+                            if sub_done[j] >= ss:
                                 continue
                             if n_sub > 1 and _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
                                 continue
-                            counters[tile, 2] += ss
+                            n_tests += ss
+                            if shared_origin:
+                                # branch-free ray loop over the sub-packet (vectorized)
+                                for r in range(ss):
+                                    du = work[DU, j, r]
+                                    dv = work[DV, j, r]
+                                    dk = work[DK, j, r]
+                                    e0 = du * n0u + dv * n0v + dk * n0k
+                                    e1 = du * n1u + dv * n1v + dk * n1k
+                                    e2 = du * n2u + dv * n2v + dk * n2k
+                                    outside = (((e0 < F0) | (e1 < F0) | (e2 < F0))
+                                               & ((e0 > F0) | (e1 > F0) | (e2 > F0)))
+                                    det = e0 + e1 + e2
+                                    inv_det = F1 / det
+                                    t = t_num / (du * pnu + dv * pnv + dk * pnk)
+                                    better = ((not outside) & (det != F0) & (t > work[WTMIN, j, r])
+                                              & (t < hit_t[j, r]))
+                                    hit_t[j, r] = t if better else hit_t[j, r]
+                                    hit_b1[j, r] = e1 * inv_det if better else hit_b1[j, r]
+                                    hit_b2[j, r] = e2 * inv_det if better else hit_b2[j, r]
+                                    hit_prim[j, r] = tri if better else hit_prim[j, r]
+                                continue
                             # branch-free ray loop: vectorized across the sub-packet
                             for r in range(ss):
                                 ou = work[OU, j, r]
@@ -336,17 +399,24 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_
                                 hit_b2[j, r] = b2 if better else hit_b2[j, r]
                                 hit_prim[j, r] = tri if better else hit_prim[j, r]
         # --- stop once every ray is finished before the end of this slice ----
+        # (finishing is monotone: a finished sub-packet is never recounted;
+        # rays that never entered the grid count as finished)
         done = 0
         for j in range(n_sub):
-            dj = 0
-            for r in range(ss):
-                t_far = min(hit_t[j, r], work[TEXIT, j, r])
-                w_far = (work[OK, j, r] + t_far * work[DK, j, r] - k_ref) * s
-                fin = (w_far <= w1) | (any_hit & (hit_prim[j, r] >= 0))
-                live = work[TEXIT, j, r] >= work[WTMIN, j, r]
-                dj += 1 if (fin & live) else 0
-            sub_done[j] = dj
-            done += dj
-        if done >= n_live:
+            if sub_done[j] < ss:
+                dj = 0
+                for r in range(ss):
+                    t_far = min(hit_t[j, r], work[TEXIT, j, r])
+                    w_far = (work[OK, j, r] + t_far * work[DK, j, r] - k_ref) * s
+                    fin = (w_far <= w1) | (any_hit & (hit_prim[j, r] >= 0))
+                    dead = work[TEXIT, j, r] < work[WTMIN, j, r]
+                    dj += 1 if (fin | dead) else 0
+                sub_done[j] = dj
+            done += sub_done[j]
+        if done >= n_sub * ss:
             break
         q += s
+    counters[tile, 0] += 1
+    counters[tile, 1] += n_cells
+    counters[tile, 2] += n_tests
+    counters[tile, 3] += n_cand

@@ -12,12 +12,12 @@ Point lights fall off with 1/d^2; directional lights do not.
 import numpy as np
 from numba import prange
 
-from ._jit import kernel, parallel_arith_kernel
+from ._jit import helper, kernel, parallel_arith_kernel
 from .camera import primary_dir
 from .triangle import surface_point
 
 
-@kernel
+@helper
 def sample_texture(tex_data, tex_info, tex, u, v):
     """Bilinear lookup with wrap-around; v = 0 is the bottom row."""
     off = tex_info[tex, 0]

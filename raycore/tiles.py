@@ -11,10 +11,10 @@ shadow rays from visible surface points to one light.
 import numpy as np
 from numba import prange
 
-from ._jit import fetch_add, kernel, parallel_kernel
+from ._jit import fetch_add, helper, kernel, parallel_kernel
 from .camera import primary_dir
 from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_WORK, OK, OU, OV,
-                       OX, OY, OZ, SU, SV, SZ, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
+                       OX, OY, OZ, SU, SV, SZ, DU, DV, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
                        pick_axis, set_bounds, setup_rays, slab_exit, walk)
 from .grid_dda import dda_trace
 from .triangle import surface_point
@@ -108,12 +108,12 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
         _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, g_lo, g_hi, g_dims,
                     g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
     elif n_live > 0:
-        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, K, s, n_live, k_ref, w_end,
+        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, n_live, k_ref, w_end,
              sub, sub_active, sub_done, mailbox, g_lo, g_dims, g_cell, g_inv,
              cell_start, cell_tris, tri_verts, eps, counters, tile)
 
 
-@kernel
+@helper
 def _camera_rays(rays, cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y):
     """The packet's camera rays as general rays (for the DDA fallback)."""
     for j in range(rays.shape[1]):
@@ -172,15 +172,6 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
         w_end = k_ref - g_lo[K]
     if not w_end >= F0:                # the eye is past the grid along K
         return K, s, 0, F0, F0
-    ix_e = F1 if K == 0 else F0        # one-hot selectors: branch-free permutation
-    iy_e = F1 if K == 1 else F0
-    iz_e = F1 if K == 2 else F0
-    ux_e = F1 if U == 0 else F0
-    uy_e = F1 if U == 1 else F0
-    uz_e = F1 if U == 2 else F0
-    vx_e = F1 if V == 0 else F0
-    vy_e = F1 if V == 1 else F0
-    vz_e = F1 if V == 2 else F0
     ex, ey, ez = cam[0], cam[1], cam[2]
     f0, f1, f2 = cam[3], cam[4], cam[5]
     r0, r1, r2 = cam[6], cam[7], cam[8]
@@ -196,9 +187,10 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
         for c in range(4):
             dx, dy, dz = primary_dir(cam, x0 + (sub_size - 1) * (c & 1),
                                      y0 + (sub_size - 1) * (c >> 1), jx, jy)
-            dk = dx * ix_e + dy * iy_e + dz * iz_e
-            su = (dx * ux_e + dy * uy_e + dz * uz_e) / dk
-            sv = (dx * vx_e + dy * vy_e + dz * vz_e) / dk
+            d = (dx, dy, dz)
+            dk = d[K]
+            su = d[U] / dk
+            sv = d[V] / dk
             u = ou + (k_ref - ok) * su
             v = ov + (k_ref - ok) * sv
             u0, u1 = min(u0, u), max(u1, u)
@@ -221,13 +213,18 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
             dx *= inv
             dy *= inv
             dz *= inv
-            dk = dx * ix_e + dy * iy_e + dz * iz_e
+            # permutation by selects on loop-invariant axes (exact, vectorizes)
+            dk = dx if K == 0 else (dy if K == 1 else dz)
+            du = dx if U == 0 else (dy if U == 1 else dz)
+            dv = dx if V == 0 else (dy if V == 1 else dz)
             sz = F1 / dk
             work[OU, j, r] = ou
             work[OV, j, r] = ov
             work[OK, j, r] = ok
-            work[SU, j, r] = (dx * ux_e + dy * uy_e + dz * uz_e) * sz
-            work[SV, j, r] = (dx * vx_e + dy * vy_e + dz * vz_e) * sz
+            work[SU, j, r] = du * sz
+            work[SV, j, r] = dv * sz
+            work[DU, j, r] = du
+            work[DV, j, r] = dv
             work[SZ, j, r] = sz
             work[DK, j, r] = dk
             work[WTMIN, j, r] = F0
@@ -288,7 +285,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                     g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
                                     counters, tile)
                     elif n_live > 0:
-                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, K, s, n_live,
+                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s, n_live,
                              k_ref, w_end, sub, sub_active, sub_done, mailbox, g_lo, g_dims,
                              g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
                     for j in range(n_sub):
@@ -304,7 +301,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                 out_b2[p] = hit_b2[j, r]
 
 
-@kernel
+@helper
 def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
                 light_kind, lx, ly, lz, offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
                 out_vis):

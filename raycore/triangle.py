@@ -15,7 +15,7 @@ it accurate). Inputs are already permuted so that index 2 is `kz`.
 """
 import numpy as np
 
-from ._jit import kernel
+from ._jit import helper, kernel
 
 
 @kernel
@@ -67,7 +67,7 @@ def woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
     return hit, T * inv_det, V * inv_det, W * inv_det
 
 
-@kernel
+@helper
 def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
     """Closest-hit test of one ray against triangle `tri` of tri_verts (n, 9).
 
@@ -90,7 +90,7 @@ def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
     return hit, t, b1, b2
 
 
-@kernel
+@helper
 def surface_point(tri_verts, tri, b1, b2):
     """Hit point from barycentrics (more accurate than o + t d) and the unit
     geometric normal of triangle `tri`: (px, py, pz, nx, ny, nz)."""
