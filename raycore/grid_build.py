@@ -180,7 +180,7 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     return cell_start, cell_tris
 
 
-def build_grid(tri_verts: np.ndarray, density: float = 1.0, n_chunks: int = 0) -> Grid:
+def build_grid(tri_verts: np.ndarray, density: float = 0.5, n_chunks: int = 0) -> Grid:
     """Build the grid over tri_verts (n, 9) f32. `n_chunks` 0 = one per thread."""
     import numba
     n = tri_verts.shape[0]

@@ -134,6 +134,7 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
         return K, s, 0, F0, F0
     U = (K + 1) % 3
     V = (K + 2) % 3
+    sf = np.float32(s)                 # float sign: an int would turn the math float64
     k_first = INF
     k_last = -INF
     for j in range(n_sub):
@@ -154,11 +155,11 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
                                rays[TMIN, j, r], rays[TMAX, j, r], g_lo, g_hi)
             inside = t0 <= t1
             work[TEXIT, j, r] = t1 if inside else -INF
-            k_first = min(k_first, (ok + t0 * dk) * s if inside else INF)
-            k_last = max(k_last, (ok + t1 * dk) * s if inside else -INF)
+            k_first = min(k_first, (ok + t0 * dk) * sf if inside else INF)
+            k_last = max(k_last, (ok + t1 * dk) * sf if inside else -INF)
     if k_first > k_last:               # no ray enters the grid
         return K, s, 0, F0, F0
-    k_ref = k_first * s                # entry plane of the packet (w = 0)
+    k_ref = k_first * sf               # entry plane of the packet (w = 0)
     w_end = k_last - k_first           # farthest exit, in w
     n_live = 0
     for j in range(n_sub):
@@ -171,8 +172,8 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
             dk_ref = k_ref - work[OK, j, r]
             u = work[OU, j, r] + dk_ref * work[SU, j, r]
             v = work[OV, j, r] + dk_ref * work[SV, j, r]
-            gu = work[SU, j, r] * s
-            gv = work[SV, j, r] * s
+            gu = work[SU, j, r] * sf
+            gv = work[SV, j, r] * sf
             u0 = min(u0, u if on else INF)
             u1 = max(u1, u if on else -INF)
             v0 = min(v0, v if on else INF)
@@ -217,7 +218,7 @@ def packet_bounds(sub, sub_active):
                 sub[row, n_sub] = max(sub[row, n_sub], sub[row, j])
 
 
-@kernel
+@helper
 def _cull_plane(au, wa, bu, wb, cu, wc, g, bound, lower):
     """True when all three vertices lie outside the plane u - g*w = bound
     (below it for a lower bound, above it for an upper one)."""
@@ -254,6 +255,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
     ss = work.shape[2]
     U = (K + 1) % 3
     V = (K + 2) % 3
+    sf = np.float32(s)                 # float sign: an int would turn the math float64
     # counters live in scalars: a store to the counters array inside the loops
     # could alias every other array, forcing LLVM to reload them all
     n_cells = 0
@@ -286,7 +288,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
     q_last = min(max(int(np.floor((k_ref + s * w_end - lo_k) * g_inv[K])), 0), nK - 1)
     n_slices = (q_last - q) * s + 1
     for _ in range(n_slices):
-        k_lo = lo_k + q * g_cell[K]
+        k_lo = lo_k + np.float32(q) * g_cell[K]
         k_hi = k_lo + g_cell[K]
         if s > 0:
             w0 = max(F0, k_lo - k_ref)
@@ -324,9 +326,9 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
                         cu = tri_verts[tri, 6 + U]
                         cv = tri_verts[tri, 6 + V]
                         ck = tri_verts[tri, 6 + K]
-                        wa = (ak - k_ref) * s
-                        wb = (bk - k_ref) * s
-                        wc = (ck - k_ref) * s
+                        wa = (ak - k_ref) * sf
+                        wb = (bk - k_ref) * sf
+                        wc = (ck - k_ref) * sf
                         if max(wa, wb, wc) < -eps or min(wa, wb, wc) > w_end + eps:
                             continue
                         # packet frustum: all vertices outside one plane -> cull
@@ -407,7 +409,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
                 dj = 0
                 for r in range(ss):
                     t_far = min(hit_t[j, r], work[TEXIT, j, r])
-                    w_far = (work[OK, j, r] + t_far * work[DK, j, r] - k_ref) * s
+                    w_far = (work[OK, j, r] + t_far * work[DK, j, r] - k_ref) * sf
                     fin = (w_far <= w1) | (any_hit & (hit_prim[j, r] >= 0))
                     dead = work[TEXIT, j, r] < work[WTMIN, j, r]
                     dj += 1 if (fin | dead) else 0

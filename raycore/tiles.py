@@ -161,6 +161,7 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
         return K, s, 0, F0, F0
     U = (K + 1) % 3
     V = (K + 2) % 3
+    sf = np.float32(s)
     ok = cam[K]
     ou = cam[U]
     ov = cam[V]
@@ -195,8 +196,8 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
             v = ov + (k_ref - ok) * sv
             u0, u1 = min(u0, u), max(u1, u)
             v0, v1 = min(v0, v), max(v1, v)
-            gu0, gu1 = min(gu0, su * s), max(gu1, su * s)
-            gv0, gv1 = min(gv0, sv * s), max(gv1, sv * s)
+            gu0, gu1 = min(gu0, su * sf), max(gu1, su * sf)
+            gv0, gv1 = min(gv0, sv * sf), max(gv1, sv * sf)
         set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps)
         live = 0
         # per-ray loop over scalars only (no loads of cam/grid inside), so that
