@@ -105,14 +105,17 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     bg = np.asarray(cfg.background, np.float32)
     cast_shadows = cfg.shadows and n_lights > 0 and geom.faces.shape[0] > 0
     want_aov = any(a in cfg.aovs for a in ("N", "P"))
-    acc_rgba = np.zeros((H * W, 4), np.float32)
-    z = np.full(H * W, np.inf, np.float32)
-    rgba = buffers.rgba
-    z_s = buffers.z
+    offsets = sample_offsets(cfg.spp)
+    single = len(offsets) == 1
+    # the frame's images are fresh arrays (they go to the writer thread); with
+    # one sample the shader writes them directly, else samples are averaged
+    acc_rgba = np.empty((H * W, 4), np.float32) if single else np.zeros((H * W, 4), np.float32)
+    z = np.empty(H * W, np.float32) if single else np.full(H * W, np.inf, np.float32)
+    rgba = acc_rgba if single else buffers.rgba
+    z_s = z if single else buffers.z
     aov_n = np.empty((H * W if want_aov else 0, 3), np.float32)
     aov_p = np.empty_like(aov_n)
     first_prim = None
-    offsets = sample_offsets(cfg.spp)
     for jitter in offsets:
         t0 = time.perf_counter()
         hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.hits)
@@ -141,12 +144,13 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                      shading.tex_info, shading.lights, vis, cast_shadows, bg,
                      np.float32(cfg.ambient), rgba, z_s, want_aov and jitter == offsets[0],
                      aov_n, aov_p)
-        acc_rgba += rgba
-        np.minimum(z, z_s, out=z)
+        if not single:
+            acc_rgba += rgba
+            np.minimum(z, z_s, out=z)
         if first_prim is None and "id" in cfg.aovs:
             first_prim = hits.prim.copy()
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
-    if len(offsets) > 1:
+    if not single:
         acc_rgba /= len(offsets)
     aovs = {}
     if "N" in cfg.aovs:

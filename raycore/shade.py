@@ -16,6 +16,11 @@ from ._jit import helper, kernel, parallel_arith_kernel
 from .camera import primary_dir
 from .triangle import surface_point
 
+F0 = np.float32(0.0)
+F1 = np.float32(1.0)
+HALF = np.float32(0.5)
+INF = np.float32(np.inf)
+
 
 @helper
 def sample_texture(tex_data, tex_info, tex, u, v):
@@ -23,16 +28,16 @@ def sample_texture(tex_data, tex_info, tex, u, v):
     off = tex_info[tex, 0]
     w = tex_info[tex, 1]
     h = tex_info[tex, 2]
-    fx = (u - np.floor(u)) * w - 0.5
-    fy = (1.0 - (v - np.floor(v))) * h - 0.5
+    fx = (u - np.floor(u)) * w - HALF
+    fy = (F1 - (v - np.floor(v))) * h - HALF
     x0 = int(np.floor(fx))
     y0 = int(np.floor(fy))
     ax = fx - x0
     ay = fy - y0
-    r = g = b = 0.0
+    r = g = b = F0
     for dy in range(2):
         for dx in range(2):
-            wgt = (ax if dx else 1.0 - ax) * (ay if dy else 1.0 - ay)
+            wgt = (ax if dx else F1 - ax) * (ay if dy else F1 - ay)
             xi = (x0 + dx) % w
             yi = (y0 + dy) % h
             k = off + (yi * w + xi) * 3
@@ -62,18 +67,18 @@ def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
                 out_rgba[p, 0] = bg[0]
                 out_rgba[p, 1] = bg[1]
                 out_rgba[p, 2] = bg[2]
-                out_rgba[p, 3] = 0.0
-                out_z[p] = np.inf
+                out_rgba[p, 3] = F0
+                out_z[p] = INF
                 if want_aov:
                     for c in range(3):
-                        aov_n[p, c] = 0.0
-                        aov_p[p, c] = 0.0
+                        aov_n[p, c] = F0
+                        aov_p[p, c] = F0
                 continue
             dx, dy, dz = primary_dir(cam, x, y, jx, jy)
             out_z[p] = hit_t[p] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
             b1 = hit_b1[p]
             b2 = hit_b2[p]
-            b0 = 1.0 - b1 - b2
+            b0 = F1 - b1 - b2
             px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
             # smooth normal, facing the viewer
             i0, i1, i2 = faces[prim, 0], faces[prim, 1], faces[prim, 2]
@@ -81,11 +86,11 @@ def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
             ny = b0 * normals[i0, 1] + b1 * normals[i1, 1] + b2 * normals[i2, 1]
             nz = b0 * normals[i0, 2] + b1 * normals[i1, 2] + b2 * normals[i2, 2]
             length = np.sqrt(nx * nx + ny * ny + nz * nz)
-            if length > 0.0:
+            if length > F0:
                 nx, ny, nz = nx / length, ny / length, nz / length
             else:
                 nx, ny, nz = gx, gy, gz
-            if nx * dx + ny * dy + nz * dz > 0.0:
+            if nx * dx + ny * dy + nz * dz > F0:
                 nx, ny, nz = -nx, -ny, -nz
             m = tri_material[prim]
             kr, kg, kb = materials[m, 0], materials[m, 1], materials[m, 2]
@@ -103,39 +108,39 @@ def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
             cg = ambient * kg
             cb = ambient * kb
             for li in range(n_lights):
-                if use_vis and vis[li, p] == 0.0:
+                if use_vis and vis[li, p] == F0:
                     continue
-                if lights[li, 0] == 0.0:
+                if lights[li, 0] == F0:
                     lx = lights[li, 1] - px
                     ly = lights[li, 2] - py
                     lz = lights[li, 3] - pz
                     d2 = lx * lx + ly * ly + lz * lz
-                    atten = 1.0 / d2 if d2 > 0.0 else 0.0
+                    atten = F1 / d2 if d2 > F0 else F0
                 else:
                     lx = -lights[li, 1]
                     ly = -lights[li, 2]
                     lz = -lights[li, 3]
-                    atten = 1.0
+                    atten = F1
                 ll = np.sqrt(lx * lx + ly * ly + lz * lz)
-                if ll == 0.0:
+                if ll == F0:
                     continue
                 lx, ly, lz = lx / ll, ly / ll, lz / ll
                 ndl = nx * lx + ny * ly + nz * lz
-                if ndl <= 0.0:
+                if ndl <= F0:
                     continue
-                spec = 0.0
-                if ks > 0.0:
+                spec = F0
+                if ks > F0:
                     hx, hy, hz = lx - dx, ly - dy, lz - dz
                     hl = np.sqrt(hx * hx + hy * hy + hz * hz)
-                    ndh = (nx * hx + ny * hy + nz * hz) / hl if hl > 0.0 else 0.0
-                    spec = ks * max(ndh, 0.0) ** shininess
+                    ndh = (nx * hx + ny * hy + nz * hz) / hl if hl > F0 else F0
+                    spec = ks * max(ndh, F0) ** shininess
                 cr += lights[li, 4] * atten * (kr * ndl + spec)
                 cg += lights[li, 5] * atten * (kg * ndl + spec)
                 cb += lights[li, 6] * atten * (kb * ndl + spec)
             out_rgba[p, 0] = cr
             out_rgba[p, 1] = cg
             out_rgba[p, 2] = cb
-            out_rgba[p, 3] = 1.0
+            out_rgba[p, 3] = F1
             if want_aov:
                 aov_n[p, 0] = nx
                 aov_n[p, 1] = ny

@@ -94,7 +94,7 @@ def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
 def surface_point(tri_verts, tri, b1, b2):
     """Hit point from barycentrics (more accurate than o + t d) and the unit
     geometric normal of triangle `tri`: (px, py, pz, nx, ny, nz)."""
-    b0 = 1.0 - b1 - b2
+    b0 = ONE - b1 - b2
     px = b0 * tri_verts[tri, 0] + b1 * tri_verts[tri, 3] + b2 * tri_verts[tri, 6]
     py = b0 * tri_verts[tri, 1] + b1 * tri_verts[tri, 4] + b2 * tri_verts[tri, 7]
     pz = b0 * tri_verts[tri, 2] + b1 * tri_verts[tri, 5] + b2 * tri_verts[tri, 8]
@@ -108,5 +108,5 @@ def surface_point(tri_verts, tri, b1, b2):
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
     length = np.sqrt(nx * nx + ny * ny + nz * nz)
-    inv = 1.0 / length if length > 0.0 else 0.0
+    inv = ONE / length if length > ZERO else ZERO
     return px, py, pz, nx * inv, ny * inv, nz * inv
