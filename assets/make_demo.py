@@ -82,47 +82,7 @@ def checker(path, n=256, squares=8):
     out.close()
 
 
-def torus_scene(out_dir, n_keys=9, nu=128, nv=64):
-    """A ~16K-triangle torus whose cross-section ripples (vertex keyframes),
-    the benchmark mesh of the foundation issue: python make_demo.py torus DIR."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
-    w = np.linspace(0, 2 * np.pi, nv, endpoint=False)
-    U, W = np.meshgrid(u, w, indexing="ij")
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a, b = i * nv + j, ((i + 1) % nu) * nv + j
-    c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
-    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    keys = []
-    for k in range(n_keys):
-        phase = 2 * np.pi * k / (n_keys - 1)
-        r = 0.35 * (1 + 0.2 * np.sin(3 * U + phase))
-        verts = np.stack([(1 + r * np.cos(W)) * np.cos(U), r * np.sin(W) + 0.5, (1 + r * np.cos(W)) * np.sin(U)], -1)
-        write_obj(out_dir / f"torus_{k:03d}.obj", verts.reshape(-1, 3), faces)
-        keys.append(f"      - {{t: {k * 0.25:.2f}, mesh: torus_{k:03d}.obj}}")
-    (out_dir / "anim.yaml").write_text(f"""version: 1
-frames: {{start: 0, end: 47, fps: 24}}
-output: {{path: out/frame_####.exr, resolution: [1024, 1024]}}
-camera: {{eye: [0, 2.6, 2.9], look_at: [0, 0.4, 0], up: [0, 1, 0], fov: 45}}
-render: {{packet: 16, shadows: true}}
-lights:
-  - {{type: point, position: [2, 4, 3], intensity: 25}}
-materials:
-  clay: {{diffuse: [0.7, 0.6, 0.5], specular: 0.2, shininess: 32}}
-objects:
-  - name: torus
-    material: clay
-    interpolation: catmull-rom
-    extrapolate: loop
-    keyframes:
-""" + "\n".join(keys) + "\n")
-
-
 def main():
-    import sys
-    if len(sys.argv) == 3 and sys.argv[1] == "torus":
-        return torus_scene(sys.argv[2])
     HERE.mkdir(parents=True, exist_ok=True)
     for k, bend in enumerate([0.0, 1.2, 0.0, -1.2, 0.0]):
         v, f = tube(bend)

@@ -104,6 +104,48 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
         summary_table(stats)
 
 
+def _int_list(text, name, allowed=None):
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated integers, got {text!r}", param_hint=name)
+    bad = [v for v in values if allowed and v not in allowed]
+    if bad or not values:
+        raise click.BadParameter(f"allowed: {', '.join(map(str, allowed))}", param_hint=name)
+    return values
+
+
+@main.command()
+@click.option("--scene", "scenes", default="all", show_default=True,
+              help="Built-in scenes, comma-separated, or 'all' (now: demo, torus).")
+@click.option("--res", type=click.IntRange(16, 8192), default=1024, show_default=True, help="Image size N (NxN).")
+@click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
+              help="Frames per configuration (medians are reported; a warm-up frame comes first).")
+@click.option("--accel", default="grid", show_default=True, help="Acceleration structures, comma-separated (grid).")
+@click.option("--packet", "packets", default="8,16,32", show_default=True, help="Packet sizes to compare, comma-separated.")
+@click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the rows as JSON.")
+def bench(scenes, res, n_frames, accel, packets, threads, json_path):
+    """Measure fps per phase (interp, build, trace, shade, shadow) on built-in scenes."""
+    import json
+    from raycore._jit import set_threads
+    from .bench import SCENE_NAMES, run_bench
+    from .report import bench_table
+    names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
+    unknown = [n for n in names if n not in SCENE_NAMES]
+    if unknown:
+        raise click.BadParameter(f"unknown scene {unknown[0]!r}; built-in: {', '.join(SCENE_NAMES)}", param_hint="--scene")
+    accels = [a.strip() for a in accel.split(",") if a.strip()]
+    if accels != ["grid"]:
+        raise click.BadParameter("only 'grid' is available (the kd-tree comes with issue 6)", param_hint="--accel")
+    n_threads = set_threads(threads)
+    rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", (4, 8, 16, 32)), n_threads)
+    bench_table(rows)
+    if json_path:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(rows, indent=1))
+
+
 @main.command()
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
 def check(anim_yaml):

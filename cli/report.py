@@ -36,3 +36,26 @@ def summary_table(stats):
     console.print(table)
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
                   f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps)")
+
+
+def bench_table(rows):
+    """One line per scene and packet size; the fastest fps_raycast per scene marked."""
+    table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
+    for col in ("scene", "tris", "res", "packet", "threads", "build", "trace", "shade", "shadow",
+                "fps_raycast", "fps_full", "Mrays/s", "tests/ray"):
+        table.add_column(col, justify="right")
+    best = {}
+    for r in rows:
+        if r["fps_raycast"] > best.get(r["scene"], (0, None))[0]:
+            best[r["scene"]] = (r["fps_raycast"], r["packet"])
+    for r in rows:
+        mark = " *" if best[r["scene"]][1] == r["packet"] else ""
+        table.add_row(r["scene"], str(r["triangles"]), str(r["resolution"]), f"{r['packet']}{mark}",
+                      str(r["threads"]), f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
+                      f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['fps_raycast']:.1f}",
+                      f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",
+                      f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}")
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=160)      # a pipe or file gets the whole table
+    console.print(table)
