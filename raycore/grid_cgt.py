@@ -238,7 +238,7 @@ def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
 
 @kernel
 def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_live, k_ref, w_end,
-         sub, sub_active, sub_done, mailbox,
+         sub, sub_active, sub_done, sub_skip, mailbox,
          g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile):
     """Walk the grid slice by slice along K for a set-up packet, updating the
     closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry).
@@ -358,10 +358,24 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
                             pnv = e1k * e2u - e1u * e2k
                             pnk = e1u * e2v - e1v * e2u
                             t_num = xu * pnu + xv * pnv + xk * pnk
+                        # cull against every sub-packet frustum in one branch-free
+                        # loop (vectorized over sub-packets: bounds are SoA)
                         for j in range(n_sub):
-                            if sub_done[j] >= ss:
-                                continue
-                            if n_sub > 1 and _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
+                            g0 = sub[GUMIN, j]
+                            g1 = sub[GUMAX, j]
+                            h0 = sub[GVMIN, j]
+                            h1 = sub[GVMAX, j]
+                            u0 = sub[UMIN, j]
+                            u1 = sub[UMAX, j]
+                            v0 = sub[VMIN, j]
+                            v1 = sub[VMAX, j]
+                            out = ((au - g0 * wa < u0) & (bu - g0 * wb < u0) & (cu - g0 * wc < u0)) \
+                                | ((au - g1 * wa > u1) & (bu - g1 * wb > u1) & (cu - g1 * wc > u1)) \
+                                | ((av - h0 * wa < v0) & (bv - h0 * wb < v0) & (cv - h0 * wc < v0)) \
+                                | ((av - h1 * wa > v1) & (bv - h1 * wb > v1) & (cv - h1 * wc > v1))
+                            sub_skip[j] = out | (sub_done[j] >= ss)
+                        for j in range(n_sub):
+                            if sub_skip[j]:
                                 continue
                             n_tests += ss
                             if shared_origin:

@@ -64,7 +64,7 @@ def _scratch(packet, sub_size):
             np.empty((n_sub, ss), np.float32), np.zeros((n_sub, ss), np.float32),
             np.zeros((n_sub, ss), np.float32), np.empty((n_sub, ss), np.int32),
             np.empty((8, n_sub + 1), np.float32), np.empty(n_sub, np.int32),
-            np.empty(n_sub, np.int32), np.empty(MAILBOX_SIZE, np.int32))
+            np.empty(n_sub, np.int32), np.empty(n_sub, np.bool_), np.empty(MAILBOX_SIZE, np.int32))
 
 
 @kernel
@@ -94,7 +94,7 @@ def _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
 
 @kernel
 def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub,
-                       sub_active, sub_done, mailbox,
+                       sub_active, sub_done, sub_skip, mailbox,
                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                        tri_verts, eps, counters, tile):
     """CGT for a packet of arbitrary rays, or single-ray DDA when the rays
@@ -109,7 +109,7 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
                     g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
     elif n_live > 0:
         walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, n_live, k_ref, w_end,
-             sub, sub_active, sub_done, mailbox, g_lo, g_dims, g_cell, g_inv,
+             sub, sub_active, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
              cell_start, cell_tris, tri_verts, eps, counters, tile)
 
 
@@ -265,7 +265,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, mailbox = \
+        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             _scratch(packet, sub_size)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
@@ -287,7 +287,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                     counters, tile)
                     elif n_live > 0:
                         walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s, n_live,
-                             k_ref, w_end, sub, sub_active, sub_done, mailbox, g_lo, g_dims,
+                             k_ref, w_end, sub, sub_active, sub_done, sub_skip, mailbox, g_lo, g_dims,
                              g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
                     for j in range(n_sub):
                         x0, y0 = _sub_corner(px, py, j, packet, sub_size)
@@ -372,7 +372,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays, work, hit_t, occ_b1, occ_b2, occ_prim, sub, sub_active, sub_done, mailbox = \
+        rays, work, hit_t, occ_b1, occ_b2, occ_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             _scratch(packet, sub_size)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
@@ -391,7 +391,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                         offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
                                         out_vis)
                     _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
-                                       sub, sub_active, sub_done, mailbox,
+                                       sub, sub_active, sub_done, sub_skip, mailbox,
                                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                                        tri_verts, eps, counters, tile)
                     for j in range(n_sub):
@@ -416,7 +416,7 @@ def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, an
     n_packets = (n + per_packet - 1) // per_packet
     next_packet = np.zeros(1, np.int64)
     for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, mailbox = \
+        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             _scratch(packet, sub_size)
         while True:
             pk = fetch_add(next_packet, 0, 1)
@@ -432,7 +432,7 @@ def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, an
                     rays[TMIN, j, r] = t_min[k]
                     rays[TMAX, j, r] = t_max[k] if i < n else -F1
             _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
-                               sub, sub_active, sub_done, mailbox,
+                               sub, sub_active, sub_done, sub_skip, mailbox,
                                g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
                                tri_verts, eps, counters, pk)
             for j in range(n_sub):
