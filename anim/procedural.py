@@ -35,7 +35,7 @@ def torus_scene(out_dir, n_keys=9, nu=128, nv=64):
 frames: {{start: 0, end: 47, fps: 24}}
 output: {{path: out/frame_####.exr, resolution: [1024, 1024]}}
 camera: {{eye: [0, 2.6, 2.9], look_at: [0, 0.4, 0], up: [0, 1, 0], fov: 45}}
-render: {{packet: 16, shadows: true}}
+render: {{shadows: true}}
 lights:
   - {{type: point, position: [2, 4, 3], intensity: 25}}
 materials:

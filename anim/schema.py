@@ -61,7 +61,7 @@ class Camera(Strict):
 
 class Render(Strict):
     accel: Literal["grid"] = "grid"
-    packet: Literal[4, 8, 16, 32] = 16
+    packet: Literal[4, 8, 16, 32] = 32
     shadows: bool = True
     spp: Annotated[int, Field(ge=1, le=1024)] = 1
     background: Vec3 = (0.0, 0.0, 0.0)

@@ -94,3 +94,21 @@ def test_missing_mesh_and_decreasing_key_times_are_named(small_demo):
 def test_check_summarises(small_demo):
     res = CliRunner().invoke(main, ["check", str(small_demo)])
     assert res.exit_code == 0 and "7330 triangles" in res.output and "deforming" in res.output
+
+
+def test_bench_writes_spec_rows(tmp_path):
+    out = tmp_path / "bench.json"
+    res = CliRunner().invoke(main, ["bench", "--scene", "demo", "--res", "32", "--frames", "2",
+                                    "--packet", "8,16", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    rows = json.loads(out.read_text())
+    assert [r["packet"] for r in rows] == [8, 16]
+    for key in ("scene", "accel", "packet", "threads", "triangles", "build_ms", "trace_ms", "shade_ms",
+                "shadow_ms", "fps_raycast", "fps_full", "mrays_per_s", "tri_tests"):
+        assert key in rows[0]
+    assert rows[0]["triangles"] == 7330 and rows[0]["fps_raycast"] > 0
+
+
+def test_bench_rejects_unknown_scene_and_packet():
+    assert CliRunner().invoke(main, ["bench", "--scene", "nope"]).exit_code == 2
+    assert CliRunner().invoke(main, ["bench", "--packet", "12"]).exit_code == 2
