@@ -132,7 +132,7 @@ def _camera_rays(rays, cam, px, py, packet, sub_size, width, height, jx, jy, off
             rays[TMAX, j, r] = INF if (x < width) & (y < height) else -F1
 
 
-@kernel
+@helper
 def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
                  work, hit_t, hit_prim, sub, sub_active, g_lo, g_hi, eps):
     """Corner-ray set-up of a camera packet (MLRTA-style, Reshetov et al. 2005).
