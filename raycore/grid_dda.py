@@ -8,7 +8,7 @@ so 1/0 never turns into a NaN comparison.
 import numpy as np
 
 from ._jit import kernel
-from .triangle import ray_axes, woop_test
+from .triangle import ray_axes, sheared_test
 
 
 @kernel
@@ -77,12 +77,7 @@ def dda_trace(ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit,
         for j in range(cell_start[idx], cell_start[idx + 1]):
             tri = cell_tris[j]
             tests += 1
-            v = tri_verts[tri]
-            hit, t, b1, b2 = woop_test(
-                v[kx] - o[kx], v[ky] - o[ky], v[kz] - o[kz],
-                v[3 + kx] - o[kx], v[3 + ky] - o[ky], v[3 + kz] - o[kz],
-                v[6 + kx] - o[kx], v[6 + ky] - o[ky], v[6 + kz] - o[kz],
-                sx, sy, sz)
+            hit, t, b1, b2 = sheared_test(tri_verts, tri, o, kx, ky, kz, sx, sy, sz)
             if hit and t > t_min and t < best_t:
                 best_t = t
                 best_prim = tri

@@ -68,6 +68,17 @@ def woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
 
 
 @helper
+def sheared_test(tri_verts, tri, o, kx, ky, kz, sx, sy, sz):
+    """woop_test of triangle `tri` for a ray from o (tuple) with shear
+    (kx, ky, kz, sx, sy, sz) already set up: (hit, t, b1, b2)."""
+    return woop_test(
+        tri_verts[tri, kx] - o[kx], tri_verts[tri, ky] - o[ky], tri_verts[tri, kz] - o[kz],
+        tri_verts[tri, 3 + kx] - o[kx], tri_verts[tri, 3 + ky] - o[ky], tri_verts[tri, 3 + kz] - o[kz],
+        tri_verts[tri, 6 + kx] - o[kx], tri_verts[tri, 6 + ky] - o[ky], tri_verts[tri, 6 + kz] - o[kz],
+        sx, sy, sz)
+
+
+@helper
 def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
     """Closest-hit test of one ray against triangle `tri` of tri_verts (n, 9).
 
@@ -75,17 +86,9 @@ def intersect_ray(ox, oy, oz, dx, dy, dz, tri_verts, tri, t_min, t_max):
     hit only when t_min < t < t_max.
     """
     kx, ky, kz = ray_axes(dx, dy, dz)
-    o = (ox, oy, oz)
     d = (dx, dy, dz)
     sz = ONE / d[kz]
-    sx = d[kx] * sz
-    sy = d[ky] * sz
-    v = tri_verts[tri]
-    hit, t, b1, b2 = woop_test(
-        v[kx] - o[kx], v[ky] - o[ky], v[kz] - o[kz],
-        v[3 + kx] - o[kx], v[3 + ky] - o[ky], v[3 + kz] - o[kz],
-        v[6 + kx] - o[kx], v[6 + ky] - o[ky], v[6 + kz] - o[kz],
-        sx, sy, sz)
+    hit, t, b1, b2 = sheared_test(tri_verts, tri, (ox, oy, oz), kx, ky, kz, d[kx] * sz, d[ky] * sz, sz)
     hit = hit & (t > t_min) & (t < t_max)
     return hit, t, b1, b2
 
