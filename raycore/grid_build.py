@@ -108,28 +108,43 @@ def grid_dims(extent: np.ndarray, n_tris: int, density: float) -> np.ndarray:
     return dims.astype(np.int32)
 
 
+F0 = np.float32(0.0)
+INDEX_LIMIT = np.float32(1e9)          # beyond it (or NaN, inf) int() is undefined
+
+
+@helper
+def _axis_range(p, q, r, pad, lo, inv, n):
+    """Clamped cell indices (i0, i1) of [min - pad, max + pad] on one axis and
+    whether they are defined (finite input)."""
+    f0 = (min(p, q, r) - pad - lo) * inv
+    f1 = (max(p, q, r) + pad - lo) * inv
+    # NaN and inf propagate through the sum (min/max may skip a NaN)
+    ok = (abs(p + q + r) < np.float32(np.inf)) & (abs(f0) < INDEX_LIMIT) & (abs(f1) < INDEX_LIMIT)
+    f0 = f0 if ok else F0
+    f1 = f1 if ok else F0
+    # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way
+    return min(max(int(f0), 0), n - 1), min(max(int(f1), 0), n - 1), ok
+
+
 @helper
 def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
     """Write ranges[t] = inclusive cell index range of triangle t's widened
-    bbox, or an empty range (x0 > x1) if a coordinate is not finite."""
-    ok = True
-    for a in range(3):
-        x0 = min(tri_verts[t, a], tri_verts[t, 3 + a], tri_verts[t, 6 + a]) - pad
-        x1 = max(tri_verts[t, a], tri_verts[t, 3 + a], tri_verts[t, 6 + a]) + pad
-        f0 = (x0 - lo[a]) * inv_cell[a]
-        f1 = (x1 - lo[a]) * inv_cell[a]
-        # NaN and inf propagate through the sum (min/max may skip a NaN);
-        # the index bounds keep int() defined
-        total = tri_verts[t, a] + tri_verts[t, 3 + a] + tri_verts[t, 6 + a]
-        ok = ok and abs(total) < np.inf and abs(f0) < 1e9 and abs(f1) < 1e9
-        f0 = f0 if ok else 0.0
-        f1 = f1 if ok else 0.0
-        # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way
-        ranges[t, a] = min(max(int(f0), 0), dims[a] - 1)
-        ranges[t, 3 + a] = min(max(int(f1), 0), dims[a] - 1)
-    if not ok:
-        ranges[t, 0] = 1
-        ranges[t, 3] = 0
+    bbox, or an empty range (x0 > x1) if a coordinate is not finite.
+    lo, inv_cell, dims: tuples of scalars (array loads here would be redone
+    after every store to `ranges`, which might alias them)."""
+    x0, x1, okx = _axis_range(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6], pad,
+                              lo[0], inv_cell[0], dims[0])
+    y0, y1, oky = _axis_range(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7], pad,
+                              lo[1], inv_cell[1], dims[1])
+    z0, z1, okz = _axis_range(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8], pad,
+                              lo[2], inv_cell[2], dims[2])
+    ok = okx & oky & okz
+    ranges[t, 0] = x0 if ok else 1
+    ranges[t, 1] = y0
+    ranges[t, 2] = z0
+    ranges[t, 3] = x1 if ok else 0
+    ranges[t, 4] = y1
+    ranges[t, 5] = z1
 
 
 @parallel_arith_kernel
@@ -137,16 +152,24 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     n = tri_verts.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     n_cells = nx * ny * nz
+    lo3 = (lo[0], lo[1], lo[2])
+    inv3 = (inv_cell[0], inv_cell[1], inv_cell[2])
+    dims3 = (np.int64(nx), np.int64(ny), np.int64(nz))
     ranges = np.empty((n, 6), np.int32)
     hist = np.zeros((n_chunks, n_cells), np.int32)
     # 1. count, one histogram per chunk
     for c in prange(n_chunks):
         for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges)
-            for iz in range(ranges[t, 2], ranges[t, 5] + 1):
-                for iy in range(ranges[t, 1], ranges[t, 4] + 1):
+            _cell_range(tri_verts, t, lo3, inv3, dims3, pad, ranges)
+            x0, y0, z0 = ranges[t, 0], ranges[t, 1], ranges[t, 2]
+            x1, y1, z1 = ranges[t, 3], ranges[t, 4], ranges[t, 5]
+            if x0 == x1 and y0 == y1 and z0 == z1:        # most triangles: one cell
+                hist[c, (z0 * ny + y0) * nx + x0] += 1
+                continue
+            for iz in range(z0, z1 + 1):
+                for iy in range(y0, y1 + 1):
                     row = (iz * ny + iy) * nx
-                    for ix in range(ranges[t, 0], ranges[t, 3] + 1):
+                    for ix in range(x0, x1 + 1):
                         hist[c, row + ix] += 1
     # 2. scan: cell totals, then each chunk's write offset per cell
     cell_start = np.empty(n_cells + 1, np.int32)
@@ -171,10 +194,12 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     cell_tris = np.empty(acc, np.int32)
     for c in prange(n_chunks):
         for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            for iz in range(ranges[t, 2], ranges[t, 5] + 1):
-                for iy in range(ranges[t, 1], ranges[t, 4] + 1):
+            x0, y0, z0 = ranges[t, 0], ranges[t, 1], ranges[t, 2]
+            x1, y1, z1 = ranges[t, 3], ranges[t, 4], ranges[t, 5]
+            for iz in range(z0, z1 + 1):
+                for iy in range(y0, y1 + 1):
                     row = (iz * ny + iy) * nx
-                    for ix in range(ranges[t, 0], ranges[t, 3] + 1):
+                    for ix in range(x0, x1 + 1):
                         cell_tris[hist[c, row + ix]] = t
                         hist[c, row + ix] += 1
     return cell_start, cell_tris
