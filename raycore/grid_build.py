@@ -109,21 +109,19 @@ def grid_dims(extent: np.ndarray, n_tris: int, density: float) -> np.ndarray:
 
 
 F0 = np.float32(0.0)
-INDEX_LIMIT = np.float32(1e9)          # beyond it (or NaN, inf) int() is undefined
 
 
 @helper
-def _axis_range(p, q, r, pad, lo, inv, n):
-    """Clamped cell indices (i0, i1) of [min - pad, max + pad] on one axis and
-    whether they are defined (finite input)."""
+def _axis_range(p, q, r, pad, lo, inv, n, ok):
+    """Clamped cell indices (i0, i1) of [min - pad, max + pad] on one axis.
+    Finite triangles lie inside the grid bounds, so their indices stay small;
+    for the others (ok False) 0 is used, as int() of NaN is undefined."""
     f0 = (min(p, q, r) - pad - lo) * inv
     f1 = (max(p, q, r) + pad - lo) * inv
-    # NaN and inf propagate through the sum (min/max may skip a NaN)
-    ok = (abs(p + q + r) < np.float32(np.inf)) & (abs(f0) < INDEX_LIMIT) & (abs(f1) < INDEX_LIMIT)
     f0 = f0 if ok else F0
     f1 = f1 if ok else F0
     # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way
-    return min(max(int(f0), 0), n - 1), min(max(int(f1), 0), n - 1), ok
+    return min(max(int(f0), 0), n - 1), min(max(int(f1), 0), n - 1)
 
 
 @helper
@@ -132,13 +130,16 @@ def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
     bbox, or an empty range (x0 > x1) if a coordinate is not finite.
     lo, inv_cell, dims: tuples of scalars (array loads here would be redone
     after every store to `ranges`, which might alias them)."""
-    x0, x1, okx = _axis_range(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6], pad,
-                              lo[0], inv_cell[0], dims[0])
-    y0, y1, oky = _axis_range(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7], pad,
-                              lo[1], inv_cell[1], dims[1])
-    z0, z1, okz = _axis_range(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8], pad,
-                              lo[2], inv_cell[2], dims[2])
-    ok = okx & oky & okz
+    total = F0
+    for k in range(9):
+        total += tri_verts[t, k]
+    ok = abs(total) < np.float32(np.inf)       # NaN and inf propagate through the sum
+    x0, x1 = _axis_range(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6], pad,
+                         lo[0], inv_cell[0], dims[0], ok)
+    y0, y1 = _axis_range(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7], pad,
+                         lo[1], inv_cell[1], dims[1], ok)
+    z0, z1 = _axis_range(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8], pad,
+                         lo[2], inv_cell[2], dims[2], ok)
     ranges[t, 0] = x0 if ok else 1
     ranges[t, 1] = y0
     ranges[t, 2] = z0
