@@ -45,7 +45,7 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
                        background=tuple(spec.render.background), ambient=spec.render.ambient)
     shading = shading_of(scene)
     vf_start, vf_faces = vertex_face_csr(scene.faces, scene.n_vertices)
-    buffers = FrameBuffers(res, res, shading.lights.shape[0])
+    buffers = FrameBuffers(res, res, shading.lights.shape[0], packet)
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
     for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up

@@ -124,7 +124,7 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
         with lock:
             row["write_ms"] = (time.perf_counter() - t0) * 1e3
 
-    buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0])
+    buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
     wall0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = []

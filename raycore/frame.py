@@ -15,7 +15,7 @@ from .config import RenderConfig
 from .grid_build import build_grid
 from .mesh import gather_triangles, vertex_normals
 from .shade import shade_pixels
-from .trace import hit_buffers, trace_camera, trace_light
+from .trace import camera_buffers, trace_camera, trace_light
 
 
 class Geometry(NamedTuple):
@@ -70,10 +70,10 @@ class FrameBuffers:
     """Per-pixel work arrays kept from frame to frame (same resolution): fresh
     large arrays cost page faults on every frame."""
 
-    def __init__(self, width, height, n_lights):
+    def __init__(self, width, height, n_lights, packet):
         n = width * height
-        self.size = (width, height, n_lights)
-        self.hits = hit_buffers(n)
+        self.size = (width, height, n_lights, packet)
+        self.camera = camera_buffers(width, height, packet)
         self.vis = np.empty((n_lights, n), np.float32)
         self.rgba = np.empty((n, 4), np.float32)
         self.z = np.empty(n, np.float32)
@@ -85,8 +85,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     reuse work arrays; the returned images are always fresh arrays."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
-    if buffers is None or buffers.size != (W, H, n_lights):
-        buffers = FrameBuffers(W, H, n_lights)
+    if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
+        buffers = FrameBuffers(W, H, n_lights, cfg.packet)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
     t0 = time.perf_counter()
@@ -118,7 +118,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     first_prim = None
     for jitter in offsets:
         t0 = time.perf_counter()
-        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.hits)
+        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         counters["rays"] += W * H
         counters["cells"] += int(hits.counters[1])

@@ -252,10 +252,14 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
 @parallel_kernel
 def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  out_t, out_prim, out_b1, out_b2, counters):
+                  sw_t, sw_prim, sw_b1, sw_b2, counters):
     """Closest hits of the camera rays (sub-pixel offset jx, jy) for every pixel.
 
-    out_*: (height * width,) arrays, row-major from the top; out_prim -1 = miss.
+    sw_*: packet-major hits (n_packets, n_sub, S*S), packet (px, py) at index
+    (py // packet) * packets_x + px // packet, ray r of sub-packet j as in
+    _sub_corner; each packet traces straight into its own slot (copying hits
+    out to row-major order inside the traversal cost a third of its time).
+    `unswizzle` turns them into row-major images. prim -1 = miss.
     counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
     """
     tiles_x = (width + tile_size - 1) // tile_size
@@ -264,8 +268,9 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     ss = sub_size * sub_size
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
+    packets_x = (width + packet - 1) // packet
     for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
+        rays, work, _t, _b1, _b2, _prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             _scratch(packet, sub_size)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
@@ -276,6 +281,11 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             ty0 = (tile // tiles_x) * tile_size
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
+                    pk = (py // packet) * packets_x + px // packet
+                    hit_t = sw_t[pk]
+                    hit_prim = sw_prim[pk]
+                    hit_b1 = sw_b1[pk]
+                    hit_b2 = sw_b2[pk]
                     K, s, n_live, k_ref, w_end = setup_camera(
                         cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
                         work, hit_t, hit_prim, sub, sub_active, g_lo, g_hi, eps)
@@ -289,17 +299,36 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                         walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s, n_live,
                              k_ref, w_end, sub, sub_active, sub_done, sub_skip, mailbox, g_lo, g_dims,
                              g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
-                    for j in range(n_sub):
-                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
-                        for r in range(ss):
-                            x = x0 + off_x[r]
-                            y = y0 + off_y[r]
-                            if (x < width) & (y < height):
-                                p = y * width + x
-                                out_t[p] = hit_t[j, r]
-                                out_prim[p] = hit_prim[j, r]
-                                out_b1[p] = hit_b1[j, r]
-                                out_b2[p] = hit_b2[j, r]
+
+
+def swizzle_offsets(width, height, packet, sub_size):
+    """Row and column terms of the packet-major index of pixel (x, y):
+    flat index into sw_*.reshape(-1) = row_off[y] + col_off[x]."""
+    n_sx = packet // sub_size
+    ss = sub_size * sub_size
+    n_sub = n_sx * n_sx
+    packets_x = -(-width // packet)
+    y = np.arange(height)
+    x = np.arange(width)
+    row_off = ((y // packet) * packets_x * n_sub * ss + ((y % packet) // sub_size) * n_sx * ss
+               + (y % sub_size) * sub_size)
+    col_off = (x // packet) * n_sub * ss + ((x % packet) // sub_size) * ss + x % sub_size
+    return row_off.astype(np.int64), col_off.astype(np.int64)
+
+
+@parallel_kernel
+def unswizzle(sw_t, sw_prim, sw_b1, sw_b2, row_off, col_off, out_t, out_prim, out_b1, out_b2):
+    """Packet-major hits -> row-major (H*W,) images (a gather per pixel)."""
+    width = col_off.shape[0]
+    for y in prange(row_off.shape[0]):
+        base = row_off[y]
+        p0 = y * width
+        for x in range(width):
+            k = base + col_off[x]
+            out_t[p0 + x] = sw_t[k]
+            out_prim[p0 + x] = sw_prim[k]
+            out_b1[p0 + x] = sw_b1[k]
+            out_b2[p0 + x] = sw_b2[k]
 
 
 # a shadow ray to a point light stops this fraction short of the light, so a

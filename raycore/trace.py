@@ -7,7 +7,8 @@ import numpy as np
 from .config import EPS_CULL_REL, EPS_SHADOW_REL
 from .grid_build import Grid
 from .grid_cgt import N_COUNTERS
-from .tiles import tile_size_for, trace_primary, trace_ray_batch, trace_shadows
+from .tiles import (swizzle_offsets, tile_size_for, trace_primary, trace_ray_batch,
+                    trace_shadows, unswizzle)
 
 PACKET_SIZES = (4, 8, 16, 32)
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
@@ -39,24 +40,49 @@ def _cull_eps(grid: Grid) -> np.float32:
 
 
 def hit_buffers(n: int) -> Hits:
-    """Output arrays for n rays. Reusing them across frames avoids ~4 ms of
-    page faults per 1024^2 frame (fresh large arrays are zero-filled by the OS)."""
+    """Row-major output arrays for n rays. Reusing them across frames avoids
+    ~4 ms of page faults per 1024^2 frame (fresh arrays are zero-filled)."""
     return Hits(np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32),
                 np.empty(n, np.float32), None)
 
 
+class CameraBuffers(NamedTuple):
+    """Row-major hits plus the packet-major arrays the traversal writes and the
+    index terms that map one to the other; reused across frames."""
+    hits: Hits
+    swizzled: tuple
+    row_off: np.ndarray
+    col_off: np.ndarray
+    key: tuple
+
+
+def camera_buffers(width, height, packet) -> CameraBuffers:
+    sub = min(packet, SUB)
+    n_packets = -(-width // packet) * -(-height // packet)
+    shape = (n_packets, (packet // sub) ** 2, sub * sub)
+    swizzled = (np.empty(shape, np.float32), np.empty(shape, np.int32),
+                np.empty(shape, np.float32), np.empty(shape, np.float32))
+    row_off, col_off = swizzle_offsets(width, height, packet, sub)
+    return CameraBuffers(hit_buffers(width * height), swizzled, row_off, col_off,
+                         (width, height, packet))
+
+
 def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.5, 0.5),
-                 out: Hits = None) -> Hits:
+                 out: CameraBuffers = None) -> Hits:
     """Trace one camera ray per pixel (at sub-pixel offset `jitter`); results
-    go into `out` (from hit_buffers) when given."""
+    go into `out` (from camera_buffers, same size and packet) when given."""
     sub, tile, n_tiles, threads = _layout(width, height, packet)
-    n = width * height
-    out_t, out_prim, out_b1, out_b2, _ = out if out is not None else hit_buffers(n)
+    if out is None or out.key != (width, height, packet):
+        out = camera_buffers(width, height, packet)
+    sw_t, sw_prim, sw_b1, sw_b2 = out.swizzled
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     trace_primary(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
                   packet, sub, tile, threads, *grid[:5], grid.cell_start, grid.cell_tris,
-                  tri_verts, _cull_eps(grid), out_t, out_prim, out_b1, out_b2, counters)
-    return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))
+                  tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters)
+    h = out.hits
+    unswizzle(sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1),
+              out.row_off, out.col_off, h.t, h.prim, h.b1, h.b2)
+    return Hits(h.t, h.prim, h.b1, h.b2, counters.sum(axis=0))
 
 
 def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
