@@ -118,7 +118,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     first_prim = None
     for jitter in offsets:
         t0 = time.perf_counter()
-        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera)
+        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera,
+                            row_major=False)
+        layout = (buffers.camera.row_off, buffers.camera.col_off)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         counters["rays"] += W * H
         counters["cells"] += int(hits.counters[1])
@@ -131,15 +133,15 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             for li in range(n_lights):
                 kind = int(shading.lights[li, 0])
                 _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
-                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li])
-                counters["shadow_rays"] += int(np.count_nonzero(hits.prim >= 0))
+                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout)
+                counters["shadow_rays"] += int(np.count_nonzero(hits.prim >= 0))  # padding slots are -1
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
         shade_pixels(cam, W, H, np.float32(jitter[0]), np.float32(jitter[1]),
-                     hits.t, hits.prim, hits.b1, hits.b2, tri_verts, geom.faces, normals,
+                     hits.t, hits.prim, hits.b1, hits.b2, *layout, tri_verts, geom.faces, normals,
                      geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
                      shading.tex_info, shading.lights, vis, cast_shadows, bg,
                      np.float32(cfg.ambient), rgba, z_s, want_aov and jitter == offsets[0],
@@ -147,8 +149,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         if not single:
             acc_rgba += rgba
             np.minimum(z, z_s, out=z)
-        if first_prim is None and "id" in cfg.aovs:
-            first_prim = hits.prim.copy()
+        if first_prim is None and "id" in cfg.aovs:      # gathered to row-major here
+            first_prim = hits.prim[layout[0][:, None] + layout[1][None, :]].reshape(-1)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
     if not single:
         acc_rgba /= len(offsets)

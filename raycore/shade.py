@@ -48,11 +48,14 @@ def sample_texture(tex_data, tex_info, tex, u, v):
 
 
 @parallel_arith_kernel
-def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
+def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
                  tri_verts, faces, normals, tri_material, materials, uvs,
                  tex_data, tex_info, lights, vis, use_vis, bg, ambient,
                  out_rgba, out_z, want_aov, aov_n, aov_p):
     """Colour (H*W, 4) and view-axis depth Z (H*W,) of every pixel.
+
+    The hits of pixel (x, y) are at row_off[y] + col_off[x]: packet-major as
+    the traversal wrote them, or row-major (row_off = y * W, col_off = x).
 
     vis (n_light, H*W) is read only when use_vis; aov_n / aov_p (H*W, 3)
     are written only when want_aov (otherwise they may be empty).
@@ -62,7 +65,8 @@ def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
     for y in prange(height):
         for x in range(width):
             p = y * width + x
-            prim = hit_prim[p]
+            k = row_off[y] + col_off[x]
+            prim = hit_prim[k]
             if prim < 0:
                 out_rgba[p, 0] = bg[0]
                 out_rgba[p, 1] = bg[1]
@@ -75,9 +79,9 @@ def shade_pixels(cam, width, height, jx, jy, hit_t, hit_prim, hit_b1, hit_b2,
                         aov_p[p, c] = F0
                 continue
             dx, dy, dz = primary_dir(cam, x, y, jx, jy)
-            out_z[p] = hit_t[p] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
-            b1 = hit_b1[p]
-            b2 = hit_b2[p]
+            out_z[p] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
+            b1 = hit_b1[k]
+            b2 = hit_b2[k]
             b0 = F1 - b1 - b2
             px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
             # smooth normal, facing the viewer

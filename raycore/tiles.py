@@ -338,7 +338,8 @@ SHADOW_T_MAX_FRACTION = np.float32(1.0 - 1e-6)
 
 @helper
 def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
-                light_kind, lx, ly, lz, offset_scale, tri_verts, hit_prim, hit_b1, hit_b2):
+                light_kind, lx, ly, lz, offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
+                row_off, col_off):
     """Set up ray (j, r) of a shadow packet from pixel (x, y) toward the light;
     inactive (TMAX < TMIN) for pixels outside the image, misses, and surfaces
     facing away from the light: their visibility stays 0 (the caller zeroes
@@ -354,11 +355,11 @@ def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
     rays[DZ, j, r] = cam[5]
     if x >= width or y >= height:
         return
-    p = y * width + x
-    prim = hit_prim[p]
+    k = row_off[y] + col_off[x]         # where the hits of pixel (x, y) are
+    prim = hit_prim[k]
     if prim < 0:
         return
-    sx, sy, sz, nx, ny, nz = surface_point(tri_verts, prim, hit_b1[p], hit_b2[p])
+    sx, sy, sz, nx, ny, nz = surface_point(tri_verts, prim, hit_b1[k], hit_b2[k])
     vx, vy, vz = primary_dir(cam, x, y, jx, jy)
     if nx * vx + ny * vy + nz * vz > F0:
         nx, ny, nz = -nx, -ny, -nz
@@ -391,8 +392,9 @@ def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
 def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   light_kind, lx, ly, lz, offset_scale,
                   g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  hit_prim, hit_b1, hit_b2, out_vis, counters):
+                  hit_prim, hit_b1, hit_b2, row_off, col_off, out_vis, counters):
     """Visibility (1 lit, 0 shadowed) of one light from every visible point;
+    hits of pixel (x, y) at row_off[y] + col_off[x] (see shade_pixels);
     out_vis must be zeroed by the caller (only lit pixels are written).
 
     light_kind 0 = point light at (lx, ly, lz); 1 = directional light shining
@@ -424,7 +426,8 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                         for r in range(ss):
                             _shadow_ray(rays, j, r, x0 + off_x[r], y0 + off_y[r],
                                         cam, width, height, jx, jy, light_kind, lx, ly, lz,
-                                        offset_scale, tri_verts, hit_prim, hit_b1, hit_b2)
+                                        offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
+                                        row_off, col_off)
                     _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
                                        sub, sub_active, sub_done, sub_skip, mailbox,
                                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
