@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import prange
 
-from ._jit import helper, kernel, parallel_arith_kernel
+from ._jit import kernel, parallel_arith_kernel
 from .config import EPS_GRID_REL
 
 MAX_CELLS = 1 << 24
@@ -111,41 +111,32 @@ def grid_dims(extent: np.ndarray, n_tris: int, density: float) -> np.ndarray:
 F0 = np.float32(0.0)
 
 
-@helper
-def _axis_range(p, q, r, pad, lo, inv, n, ok):
-    """Clamped cell indices (i0, i1) of [min - pad, max + pad] on one axis.
-    Finite triangles lie inside the grid bounds, so their indices stay small;
-    for the others (ok False) 0 is used, as int() of NaN is undefined."""
-    f0 = (min(p, q, r) - pad - lo) * inv
-    f1 = (max(p, q, r) + pad - lo) * inv
-    f0 = f0 if ok else F0
-    f1 = f1 if ok else F0
-    # truncation equals floor for f >= 0, and f < 0 clamps to 0 either way
-    return min(max(int(f0), 0), n - 1), min(max(int(f1), 0), n - 1)
-
-
-@helper
-def _cell_range(tri_verts, t, lo, inv_cell, dims, pad, ranges):
-    """Write ranges[t] = inclusive cell index range of triangle t's widened
-    bbox, or an empty range (x0 > x1) if a coordinate is not finite.
-    lo, inv_cell, dims: tuples of scalars (array loads here would be redone
-    after every store to `ranges`, which might alias them)."""
-    total = F0
-    for k in range(9):
-        total += tri_verts[t, k]
-    ok = abs(total) < np.float32(np.inf)       # NaN and inf propagate through the sum
-    x0, x1 = _axis_range(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6], pad,
-                         lo[0], inv_cell[0], dims[0], ok)
-    y0, y1 = _axis_range(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7], pad,
-                         lo[1], inv_cell[1], dims[1], ok)
-    z0, z1 = _axis_range(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8], pad,
-                         lo[2], inv_cell[2], dims[2], ok)
-    ranges[t, 0] = x0 if ok else 1
-    ranges[t, 1] = y0
-    ranges[t, 2] = z0
-    ranges[t, 3] = x1 if ok else 0
-    ranges[t, 4] = y1
-    ranges[t, 5] = z1
+@kernel
+def _cell_ranges(tri_verts, t0, t1, lo0, lo1, lo2, inv0, inv1, inv2, n0, n1, n2, pad, ranges):
+    """ranges (6, n) i32 = inclusive cell index ranges (x0, y0, z0, x1, y1, z1)
+    of the widened bboxes of triangles t0..t1-1; x1 = -1 (empty) for a
+    triangle with a non-finite coordinate. Scalar parameters and SoA output so
+    that LLVM vectorizes it across triangles (2x faster than row-wise)."""
+    for t in range(t0, t1):
+        total = F0
+        for k in range(9):
+            total += tri_verts[t, k]
+        ok = abs(total) < np.float32(np.inf)       # NaN and inf propagate through the sum
+        ax = (min(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6]) - pad - lo0) * inv0
+        bx = (max(tri_verts[t, 0], tri_verts[t, 3], tri_verts[t, 6]) + pad - lo0) * inv0
+        ay = (min(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7]) - pad - lo1) * inv1
+        by = (max(tri_verts[t, 1], tri_verts[t, 4], tri_verts[t, 7]) + pad - lo1) * inv1
+        az = (min(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8]) - pad - lo2) * inv2
+        bz = (max(tri_verts[t, 2], tri_verts[t, 5], tri_verts[t, 8]) + pad - lo2) * inv2
+        # int() of NaN is undefined: use 0 for non-finite triangles. Finite
+        # ones lie inside the grid bounds, so their indices stay small;
+        # truncation equals floor for f >= 0 and f < 0 clamps to 0 either way
+        ranges[0, t] = min(max(np.int32(ax if ok else F0), 0), n0 - 1)
+        ranges[1, t] = min(max(np.int32(ay if ok else F0), 0), n1 - 1)
+        ranges[2, t] = min(max(np.int32(az if ok else F0), 0), n2 - 1)
+        ranges[3, t] = min(max(np.int32(bx if ok else F0), 0), n0 - 1) if ok else -1
+        ranges[4, t] = min(max(np.int32(by if ok else F0), 0), n1 - 1)
+        ranges[5, t] = min(max(np.int32(bz if ok else F0), 0), n2 - 1)
 
 
 @parallel_arith_kernel
@@ -153,17 +144,17 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     n = tri_verts.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     n_cells = nx * ny * nz
-    lo3 = (lo[0], lo[1], lo[2])
-    inv3 = (inv_cell[0], inv_cell[1], inv_cell[2])
-    dims3 = (np.int64(nx), np.int64(ny), np.int64(nz))
-    ranges = np.empty((n, 6), np.int32)
+    ranges = np.empty((6, n), np.int32)
     hist = np.zeros((n_chunks, n_cells), np.int32)
     # 1. count, one histogram per chunk
     for c in prange(n_chunks):
-        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            _cell_range(tri_verts, t, lo3, inv3, dims3, pad, ranges)
-            x0, y0, z0 = ranges[t, 0], ranges[t, 1], ranges[t, 2]
-            x1, y1, z1 = ranges[t, 3], ranges[t, 4], ranges[t, 5]
+        t0 = c * n // n_chunks
+        t1 = (c + 1) * n // n_chunks
+        _cell_ranges(tri_verts, t0, t1, lo[0], lo[1], lo[2], inv_cell[0], inv_cell[1],
+                     inv_cell[2], nx, ny, nz, pad, ranges)
+        for t in range(t0, t1):
+            x0, y0, z0 = ranges[0, t], ranges[1, t], ranges[2, t]
+            x1, y1, z1 = ranges[3, t], ranges[4, t], ranges[5, t]
             if x0 == x1 and y0 == y1 and z0 == z1:        # most triangles: one cell
                 hist[c, (z0 * ny + y0) * nx + x0] += 1
                 continue
@@ -195,8 +186,13 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     cell_tris = np.empty(acc, np.int32)
     for c in prange(n_chunks):
         for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            x0, y0, z0 = ranges[t, 0], ranges[t, 1], ranges[t, 2]
-            x1, y1, z1 = ranges[t, 3], ranges[t, 4], ranges[t, 5]
+            x0, y0, z0 = ranges[0, t], ranges[1, t], ranges[2, t]
+            x1, y1, z1 = ranges[3, t], ranges[4, t], ranges[5, t]
+            if x0 == x1 and y0 == y1 and z0 == z1:
+                cell = (z0 * ny + y0) * nx + x0
+                cell_tris[hist[c, cell]] = t
+                hist[c, cell] += 1
+                continue
             for iz in range(z0, z1 + 1):
                 for iy in range(y0, y1 + 1):
                     row = (iz * ny + iy) * nx
