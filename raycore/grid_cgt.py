@@ -361,18 +361,10 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_
                         # cull against every sub-packet frustum in one branch-free
                         # loop (vectorized over sub-packets: bounds are SoA)
                         for j in range(n_sub):
-                            g0 = sub[GUMIN, j]
-                            g1 = sub[GUMAX, j]
-                            h0 = sub[GVMIN, j]
-                            h1 = sub[GVMAX, j]
-                            u0 = sub[UMIN, j]
-                            u1 = sub[UMAX, j]
-                            v0 = sub[VMIN, j]
-                            v1 = sub[VMAX, j]
-                            out = ((au - g0 * wa < u0) & (bu - g0 * wb < u0) & (cu - g0 * wc < u0)) \
-                                | ((au - g1 * wa > u1) & (bu - g1 * wb > u1) & (cu - g1 * wc > u1)) \
-                                | ((av - h0 * wa < v0) & (bv - h0 * wb < v0) & (cv - h0 * wc < v0)) \
-                                | ((av - h1 * wa > v1) & (bv - h1 * wb > v1) & (cv - h1 * wc > v1))
+                            out = (_cull_plane(au, wa, bu, wb, cu, wc, sub[GUMIN, j], sub[UMIN, j], True)
+                                   | _cull_plane(au, wa, bu, wb, cu, wc, sub[GUMAX, j], sub[UMAX, j], False)
+                                   | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMIN, j], sub[VMIN, j], True)
+                                   | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False))
                             sub_skip[j] = out | (sub_done[j] >= ss)
                         for j in range(n_sub):
                             if sub_skip[j]:
