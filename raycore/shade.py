@@ -24,22 +24,27 @@ INF = np.float32(np.inf)
 
 @helper
 def sample_texture(tex_data, tex_info, tex, u, v):
-    """Bilinear lookup with wrap-around; v = 0 is the bottom row."""
+    """Bilinear lookup with wrap-around; v = 0 is the bottom row. float32
+    coordinates (an int64 size would turn them float64) and a +-w wrap, since
+    texel indices only leave [0, w) by one."""
     off = tex_info[tex, 0]
     w = tex_info[tex, 1]
     h = tex_info[tex, 2]
-    fx = (u - np.floor(u)) * w - HALF
-    fy = (F1 - (v - np.floor(v))) * h - HALF
+    fx = (u - np.floor(u)) * np.float32(w) - HALF
+    fy = (F1 - (v - np.floor(v))) * np.float32(h) - HALF
     x0 = int(np.floor(fx))
     y0 = int(np.floor(fy))
-    ax = fx - x0
-    ay = fy - y0
+    ax = fx - np.float32(x0)
+    ay = fy - np.float32(y0)
     r = g = b = F0
     for dy in range(2):
+        yi = y0 + dy
+        yi = yi + h if yi < 0 else (yi - h if yi >= h else yi)
+        wy = ay if dy else F1 - ay
         for dx in range(2):
-            wgt = (ax if dx else F1 - ax) * (ay if dy else F1 - ay)
-            xi = (x0 + dx) % w
-            yi = (y0 + dy) % h
+            xi = x0 + dx
+            xi = xi + w if xi < 0 else (xi - w if xi >= w else xi)
+            wgt = (ax if dx else F1 - ax) * wy
             k = off + (yi * w + xi) * 3
             r += wgt * tex_data[k]
             g += wgt * tex_data[k + 1]
