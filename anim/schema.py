@@ -66,7 +66,7 @@ class Render(Strict):
     spp: Annotated[int, Field(ge=1, le=1024)] = 1
     background: Vec3 = (0.0, 0.0, 0.0)
     ambient: Annotated[float, Field(ge=0)] = 0.03
-    grid_density: Annotated[float, Field(gt=0, le=64)] = 0.5
+    grid_density: Annotated[float, Field(gt=0, le=64)] = 0.25
 
 
 class Light(Strict):

@@ -8,11 +8,12 @@ the AOV writes when none are asked for.
 import time
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from .camera import camera_basis
 from .config import RenderConfig
-from .grid_build import build_grid
+from .grid_build import build_grid, point_bounds
 from .mesh import gather_triangles, vertex_normals
 from .shade import shade_pixels
 from .trace import camera_buffers, trace_camera, trace_light
@@ -92,7 +93,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     t0 = time.perf_counter()
     tri_verts = np.empty((geom.faces.shape[0], 9), np.float32)
     gather_triangles(geom.vertices, geom.faces, tri_verts)
-    grid = build_grid(tri_verts, cfg.grid_density)
+    # the vertices bound every triangle and are fewer than its corners
+    bounds = point_bounds(geom.vertices, numba.get_num_threads()) if len(geom.vertices) else None
+    grid = build_grid(tri_verts, cfg.grid_density, bounds=bounds)
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
     counters["grid_dims"] = [int(d) for d in grid.dims]
 

@@ -35,28 +35,28 @@ class Grid(NamedTuple):
 
 
 @parallel_arith_kernel
-def _bounds(tri_verts, n_chunks):
-    """Bounding box of all vertices: (lo (3,), hi (3,)) f32.
+def point_bounds(points, n_chunks):
+    """Bounding box (lo (3,), hi (3,)) f32 of points (m, 3): pass the mesh
+    vertices (fewer than triangle corners) or tri_verts.reshape(-1, 3).
 
     NaN coordinates are skipped by the comparisons; an infinite coordinate
     makes the box infinite and `build_grid` then takes the finite-only path.
     """
-    n = tri_verts.shape[0]
+    m = points.shape[0]
     part = np.empty((n_chunks, 6), np.float32)
     for c in prange(n_chunks):
         lo0 = lo1 = lo2 = np.float32(np.inf)
         hi0 = hi1 = hi2 = np.float32(-np.inf)
-        for t in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            for k in range(3):
-                x = tri_verts[t, 3 * k]
-                y = tri_verts[t, 3 * k + 1]
-                z = tri_verts[t, 3 * k + 2]
-                lo0 = x if x < lo0 else lo0
-                lo1 = y if y < lo1 else lo1
-                lo2 = z if z < lo2 else lo2
-                hi0 = x if x > hi0 else hi0
-                hi1 = y if y > hi1 else hi1
-                hi2 = z if z > hi2 else hi2
+        for i in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            x = points[i, 0]
+            y = points[i, 1]
+            z = points[i, 2]
+            lo0 = x if x < lo0 else lo0
+            lo1 = y if y < lo1 else lo1
+            lo2 = z if z < lo2 else lo2
+            hi0 = x if x > hi0 else hi0
+            hi1 = y if y > hi1 else hi1
+            hi2 = z if z > hi2 else hi2
         part[c, 0] = lo0
         part[c, 1] = lo1
         part[c, 2] = lo2
@@ -202,14 +202,20 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     return cell_start, cell_tris
 
 
-def build_grid(tri_verts: np.ndarray, density: float = 0.5, n_chunks: int = 0) -> Grid:
-    """Build the grid over tri_verts (n, 9) f32. `n_chunks` 0 = one per thread."""
+def build_grid(tri_verts: np.ndarray, density: float = 0.25, n_chunks: int = 0,
+               bounds=None) -> Grid:
+    """Build the grid over tri_verts (n, 9) f32. `n_chunks` 0 = one per thread.
+    `bounds` (lo, hi): a box around every triangle, e.g. point_bounds of the
+    mesh vertices (cheaper than reading all triangle corners)."""
     import numba
     n = tri_verts.shape[0]
     if n_chunks <= 0:
         n_chunks = numba.get_num_threads()
     n_chunks = max(1, min(n_chunks, max(n, 1)))
-    lo, hi = _bounds(tri_verts, n_chunks) if n > 0 else _finite_bounds(tri_verts)
+    if bounds is not None:
+        lo, hi = bounds
+    else:
+        lo, hi = point_bounds(tri_verts.reshape(-1, 3), n_chunks) if n > 0 else _finite_bounds(tri_verts)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         lo, hi = _finite_bounds(tri_verts)
     if not np.all(np.isfinite(lo)):            # empty scene: a unit box, no triangles

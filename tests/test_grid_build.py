@@ -62,3 +62,16 @@ def test_non_finite_triangles_are_left_out(rng):
     assert np.all(np.isfinite(grid.lo)) and np.all(np.isfinite(grid.hi))
     ids = set(grid.cell_tris.tolist())
     assert 3 not in ids and 7 not in ids and len(ids) == 48
+
+
+def test_bounds_from_vertices_give_the_same_grid(rng):
+    from raycore.grid_build import point_bounds
+    vertices = (rng.random((300, 3)) * 4 - 2).astype(np.float32)
+    faces = rng.integers(0, 300, size=(500, 3)).astype(np.int32)
+    tv = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
+    used = np.unique(faces)
+    a = build_grid(tv)
+    b = build_grid(tv, bounds=point_bounds(vertices[used], 2))
+    assert np.array_equal(a.lo, b.lo) and np.array_equal(a.cell_tris, b.cell_tris)
+    c = build_grid(tv, bounds=point_bounds(vertices, 2))        # unused vertices only widen it
+    assert np.all(c.lo <= a.lo) and np.all(c.hi >= a.hi)
