@@ -1,7 +1,7 @@
 """Pinhole camera rays exactly as ../shared/SPEC.md section 3 fixes them."""
 import numpy as np
 
-from ._jit import helper, kernel
+from ._jit import helper
 
 
 def camera_basis(eye, look_at, up, fov_deg, width, height):

@@ -12,7 +12,7 @@ Point lights fall off with 1/d^2; directional lights do not.
 import numpy as np
 from numba import prange
 
-from ._jit import helper, kernel, parallel_arith_kernel
+from ._jit import helper, parallel_arith_kernel
 from .camera import primary_dir
 from .triangle import surface_point
 

@@ -15,7 +15,7 @@ from ._jit import fetch_add, helper, kernel, parallel_kernel
 from .camera import primary_dir
 from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_WORK, OK, OU, OV,
                        OX, OY, OZ, SU, SV, SZ, DU, DV, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
-                       pick_axis, set_bounds, setup_rays, slab_exit, walk)
+                       pick_axis, set_bounds, setup_rays, walk)
 from .grid_dda import dda_trace
 from .triangle import surface_point
 
@@ -265,8 +265,6 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     tiles_x = (width + tile_size - 1) // tile_size
     tiles_y = (height + tile_size - 1) // tile_size
     n_tiles = tiles_x * tiles_y
-    ss = sub_size * sub_size
-    n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
     packets_x = (width + packet - 1) // packet
     for _w in prange(n_workers):
