@@ -5,19 +5,14 @@ shadow, shade) but not written; compile time is spent in a warm-up first and
 reported apart. Rows follow ../shared/SPEC.md section 5.
 """
 import tempfile
-import time
 from pathlib import Path
-
-import numpy as np
 
 from anim.errors import SceneError
 from anim.procedural import SCENES as PROCEDURAL
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.frame import CameraPose, FrameBuffers, Geometry, render_frame
-from raycore.mesh import vertex_face_csr
 
-from .pipeline import shading_of
+from .pipeline import SceneRenderer, fps_of, median_ms, shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
 SCENE_NAMES = ("demo", *PROCEDURAL)
@@ -43,33 +38,22 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
                        spp=spec.render.spp, shadows=spec.render.shadows,
                        grid_density=spec.render.grid_density,
                        background=tuple(spec.render.background), ambient=spec.render.ambient)
-    shading = shading_of(scene)
-    vf_start, vf_faces = vertex_face_csr(scene.faces, scene.n_vertices)
-    buffers = FrameBuffers(res, res, shading.lights.shape[0], packet)
+    renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
     for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up
-        t = scene.time_of(frame)
-        t0 = time.perf_counter()
-        vertices = scene.vertices_at(t)
-        eye, look_at, up, fov = scene.camera_at(t)
-        interp_ms = (time.perf_counter() - t0) * 1e3
-        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, vf_start, vf_faces)
-        result = render_frame(geom, shading, CameraPose(eye, look_at, up, fov), cfg, buffers)
+        interp_ms, result = renderer.render(scene.time_of(frame))
         if i > 0:
             rows.append({"interp_ms": interp_ms, **result.timings,
-                         "tri_tests": result.counters["tri_tests"], "rays": result.counters["rays"]})
-
-    def med(*keys):
-        return float(np.median([sum(r[k] for k in keys) for r in rows]))
-    raycast = med("interp_ms", "build_ms", "trace_ms")
-    full = med("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms")
+                         "tri_tests": result.counters["tri_tests"]})
+    fps_raycast, fps_full = fps_of(rows)
     return {"scene": name, "accel": "grid", "packet": packet, "threads": threads,
             "triangles": int(scene.faces.shape[0]), "resolution": res, "frames": len(rows),
-            "interp_ms": med("interp_ms"), "build_ms": med("build_ms"), "trace_ms": med("trace_ms"),
-            "shade_ms": med("shade_ms"), "shadow_ms": med("shadow_ms"),
-            "fps_raycast": 1000.0 / raycast, "fps_full": 1000.0 / full,
-            "mrays_per_s": res * res / med("trace_ms") / 1e3, "tri_tests": med("tri_tests")}
+            **{k: median_ms(rows, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
+                                              "shadow_ms")},
+            "fps_raycast": fps_raycast, "fps_full": fps_full,
+            "mrays_per_s": res * res / median_ms(rows, "trace_ms") / 1e3,
+            "tri_tests": median_ms(rows, "tri_tests")}
 
 
 def run_bench(names, res, n_frames, packets, threads):

@@ -10,7 +10,6 @@ warm-up render and never mixed into fps.
 """
 import json
 import re
-import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -87,12 +86,31 @@ def plan_frames(scene, out_dir, frames, resume, overwrite):
     return todo
 
 
-def warm_up(scene, geom, shading, cfg) -> float:
+class SceneRenderer:
+    """Frames of one scene, rendered with reused work buffers: interpolate
+    (timed as interp_ms), then build, trace, shadow and shade."""
+
+    def __init__(self, scene: AnimatedScene, cfg: RenderConfig, shading: Shading):
+        self.scene, self.cfg, self.shading = scene, cfg, shading
+        self.vf = vertex_face_csr(scene.faces, scene.n_vertices)
+        self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
+
+    def render(self, t):
+        """(interp_ms, FrameResult) of the frame at time t."""
+        scene = self.scene
+        t0 = time.perf_counter()
+        vertices = scene.vertices_at(t)
+        pose = CameraPose(*scene.camera_at(t))
+        interp_ms = (time.perf_counter() - t0) * 1e3
+        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
+        return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers)
+
+
+def warm_up(scene, shading, cfg, t) -> float:
     """Compile (or load from numba's cache) every kernel on a tiny image: seconds."""
     t0 = time.perf_counter()
     small = cfg.__class__(**{**cfg.__dict__, "width": 2 * cfg.packet, "height": 2 * cfg.packet, "spp": 1})
-    eye, look_at, up, fov = scene.camera_at(scene.time_of(scene.frame_numbers[0]))
-    render_frame(geom, shading, CameraPose(eye, look_at, up, fov), small)
+    SceneRenderer(scene, small, shading).render(t)
     return time.perf_counter() - t0
 
 
@@ -102,15 +120,10 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
     todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite)
     for _, path in todo:
         path.parent.mkdir(parents=True, exist_ok=True)
-    vf_start, vf_faces = vertex_face_csr(scene.faces, scene.n_vertices)
-
-    def geometry(vertices):
-        return Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, vf_start, vf_faces)
-
     first_t = scene.time_of(todo[0][0] if todo else scene.frame_numbers[0])
-    compile_s = warm_up(scene, geometry(scene.vertices_at(first_t)), shading, cfg)
+    compile_s = warm_up(scene, shading, cfg, first_t)
+    renderer = SceneRenderer(scene, cfg, shading)
     rows = []
-    lock = threading.Lock()
 
     def write(path, result, row):
         t0 = time.perf_counter()
@@ -121,10 +134,8 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
         for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
             meta[f"frustrace:{k}"] = float(row[k])
         write_exr(str(path), channels, meta)
-        with lock:
-            row["write_ms"] = (time.perf_counter() - t0) * 1e3
+        row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
 
-    buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
     wall0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=1) as writer:
         pending = []
@@ -132,14 +143,9 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
             while len(pending) > MAX_PENDING_WRITES:
                 pending.pop(0).result()
             t = scene.time_of(frame)
-            t0 = time.perf_counter()
-            vertices = scene.vertices_at(t)
-            eye, look_at, up, fov = scene.camera_at(t)
-            interp_ms = (time.perf_counter() - t0) * 1e3
             # a frame's images are fresh arrays (only work buffers are reused),
             # so the writer thread never sees them overwritten
-            result = render_frame(geometry(vertices), shading, CameraPose(eye, look_at, up, fov), cfg,
-                                  buffers)
+            interp_ms, result = renderer.render(t)
             tm = result.timings
             rays = result.counters["rays"]
             row = {"frame": frame, "time": t, "triangles": int(scene.faces.shape[0]), "rays": rays,
@@ -167,15 +173,23 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
     return stats
 
 
+def median_ms(rows, *keys) -> float:
+    """Median over frames of the sum of the given phase timings (0 if none)."""
+    return float(np.median([sum(r[k] for k in keys) for r in rows])) if rows else 0.0
+
+
+def fps_of(rows):
+    """(fps_raycast, fps_full) as SPEC section 5 defines them."""
+    raycast = median_ms(rows, "interp_ms", "build_ms", "trace_ms")
+    full = median_ms(rows, "interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms")
+    return (1000.0 / raycast if raycast > 0 else 0.0), (1000.0 / full if full > 0 else 0.0)
+
+
 def summarize(rows, wall_s, compile_s) -> dict:
-    """fps as SPEC section 5 defines them (medians over frames)."""
-    def med(*keys):
-        return float(np.median([sum(r[k] for k in keys) for r in rows])) if rows else 0.0
-    raycast = med("interp_ms", "build_ms", "trace_ms")
-    full = med("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms")
-    return {"fps_raycast": 1000.0 / raycast if raycast > 0 else 0.0,
-            "fps_full": 1000.0 / full if full > 0 else 0.0,
+    """The stats.json summary: fps (medians over frames), compile time apart."""
+    fps_raycast, fps_full = fps_of(rows)
+    return {"fps_raycast": fps_raycast, "fps_full": fps_full,
             "fps_wall": len(rows) / wall_s if rows and wall_s > 0 else 0.0,
             "compile_s": compile_s,
-            "median_ms": {k: med(k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
-                                             "shadow_ms", "write_ms")}}
+            "median_ms": {k: median_ms(rows, k) for k in ("interp_ms", "build_ms", "trace_ms",
+                                                         "shade_ms", "shadow_ms", "write_ms")}}

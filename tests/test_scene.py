@@ -9,9 +9,7 @@ from scipy.spatial.transform import Rotation
 from anim.scene import AnimatedScene
 from anim.errors import SceneError
 from raycore.config import RenderConfig
-from raycore.frame import CameraPose, Geometry, render_frame
-from raycore.mesh import vertex_face_csr
-from cli.pipeline import shading_of
+from cli.pipeline import SceneRenderer, shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
 
@@ -96,11 +94,8 @@ def test_directional_light_needs_a_direction(tmp_path):
 
 def render(scene, spp, shadows=True, aovs=()):
     w, h = scene.spec.output.resolution
-    vf = vertex_face_csr(scene.faces, scene.n_vertices)
-    geom = Geometry(scene.vertices_at(0.0), scene.faces, scene.tri_material, scene.uvs, *vf)
     cfg = RenderConfig(width=w, height=h, packet=8, spp=spp, shadows=shadows, aovs=aovs)
-    eye, look_at, up, fov = scene.camera_at(0.0)
-    return render_frame(geom, shading_of(scene), CameraPose(eye, look_at, up, fov), cfg)
+    return SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)[1]
 
 
 def test_supersampling_averages_coverage_and_keeps_nearest_depth(tmp_path):
