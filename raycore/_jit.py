@@ -27,7 +27,6 @@ kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMAT
 helper = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMATH, inline="always")
 parallel_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                        fastmath=SAFE_FASTMATH)
-arith_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)
 parallel_arith_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                              fastmath=ARITH_FASTMATH)
 

@@ -133,11 +133,12 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         t0 = time.perf_counter()
         vis = buffers.vis if cast_shadows else buffers.vis[:0]
         if cast_shadows:
+            visible = int(np.count_nonzero(hits.prim >= 0))   # padding slots are -1
             for li in range(n_lights):
                 kind = int(shading.lights[li, 0])
                 _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
                                    shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout)
-                counters["shadow_rays"] += int(np.count_nonzero(hits.prim >= 0))  # padding slots are -1
+                counters["shadow_rays"] += visible
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3

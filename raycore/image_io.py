@@ -1,4 +1,4 @@
-"""The one OpenImageIO module: EXR frames out (atomically), textures in, PNG previews.
+"""The one OpenImageIO module: EXR frames out (atomically), textures in.
 
 Channels R G B A are stored as half, Z and AOVs as float32 (SPEC section 4).
 OpenImageIO's Python binding takes one dtype per call, so the frame is handed
@@ -60,17 +60,6 @@ def read_exr(path: str):
         return list(spec.channelnames), pixels, spec
     finally:
         inp.close()
-
-
-def write_png_preview(path: str, rgb: np.ndarray) -> None:
-    """Tone-mapped (clamped, sRGB-encoded) 8-bit PNG of a linear (H, W, 3) image."""
-    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.power(np.maximum(rgb, 0), 1 / 2.4) - 0.055)
-    img = (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
-    out = oiio.ImageOutput.create(path)
-    spec = oiio.ImageSpec(img.shape[1], img.shape[0], 3, "uint8")
-    if not (out.open(path, spec) and out.write_image(img)):
-        raise OSError(f"{path}: {out.geterror()}")
-    out.close()
 
 
 def read_texture(path: str) -> np.ndarray:

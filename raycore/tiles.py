@@ -33,6 +33,19 @@ def tile_size_for(width: int, height: int, packet: int, threads: int) -> int:
 
 
 @kernel
+def _tile_count(width, height, tile_size):
+    """(tiles per row, tiles in all) of an image cut into square tiles."""
+    tiles_x = (width + tile_size - 1) // tile_size
+    return tiles_x, tiles_x * ((height + tile_size - 1) // tile_size)
+
+
+@kernel
+def _tile_corner(tile, tiles_x, tile_size):
+    """Top-left pixel of tile number `tile` (row-major over the tiles)."""
+    return (tile % tiles_x) * tile_size, (tile // tiles_x) * tile_size
+
+
+@kernel
 def _sub_corner(px, py, j, packet, sub_size):
     """Top-left pixel of sub-packet j of the packet whose corner is (px, py).
     Ray r = ly * sub_size + lx of that sub-packet is pixel (x0 + lx, y0 + ly)."""
@@ -262,9 +275,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     `unswizzle` turns them into row-major images. prim -1 = miss.
     counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
     """
-    tiles_x = (width + tile_size - 1) // tile_size
-    tiles_y = (height + tile_size - 1) // tile_size
-    n_tiles = tiles_x * tiles_y
+    tiles_x, n_tiles = _tile_count(width, height, tile_size)
     next_tile = np.zeros(1, np.int64)
     packets_x = (width + packet - 1) // packet
     for _w in prange(n_workers):
@@ -275,8 +286,7 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             tile = fetch_add(next_tile, 0, 1)
             if tile >= n_tiles:
                 break
-            tx0 = (tile % tiles_x) * tile_size
-            ty0 = (tile // tiles_x) * tile_size
+            tx0, ty0 = _tile_corner(tile, tiles_x, tile_size)
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
                     pk = (py // packet) * packets_x + px // packet
@@ -401,9 +411,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     escape the float32 rounding of p, far below the size of any real gap.
     Points whose surface faces away from the light get 0 without a ray.
     """
-    tiles_x = (width + tile_size - 1) // tile_size
-    tiles_y = (height + tile_size - 1) // tile_size
-    n_tiles = tiles_x * tiles_y
+    tiles_x, n_tiles = _tile_count(width, height, tile_size)
     ss = sub_size * sub_size
     n_sub = packet * packet // ss
     next_tile = np.zeros(1, np.int64)
@@ -415,8 +423,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
             tile = fetch_add(next_tile, 0, 1)
             if tile >= n_tiles:
                 break
-            tx0 = (tile % tiles_x) * tile_size
-            ty0 = (tile // tiles_x) * tile_size
+            tx0, ty0 = _tile_corner(tile, tiles_x, tile_size)
             for py in range(ty0, min(ty0 + tile_size, height), packet):
                 for px in range(tx0, min(tx0 + tile_size, width), packet):
                     for j in range(n_sub):
