@@ -31,15 +31,15 @@ def torus_scene(out_dir, n_keys=9, nu=128, nv=64):
         verts = np.stack([(1 + r * np.cos(W)) * np.cos(U), r * np.sin(W) + 0.5, (1 + r * np.cos(W)) * np.sin(U)], -1)
         write_obj(out_dir / f"torus_{k:03d}.obj", verts.reshape(-1, 3), faces)
         keys.append(f"      - {{t: {k * 0.25:.2f}, mesh: torus_{k:03d}.obj}}")
-    (out_dir / "anim.yaml").write_text(f"""version: 1
-frames: {{start: 0, end: 47, fps: 24}}
-output: {{path: out/frame_####.exr, resolution: [1024, 1024]}}
-camera: {{eye: [0, 2.6, 2.9], look_at: [0, 0.4, 0], up: [0, 1, 0], fov: 45}}
-render: {{shadows: true}}
+    (out_dir / "anim.yaml").write_text("""version: 1
+frames: {start: 0, end: 47, fps: 24}
+output: {path: out/frame_####.exr, resolution: [1024, 1024]}
+camera: {eye: [0, 2.6, 2.9], look_at: [0, 0.4, 0], up: [0, 1, 0], fov: 45}
+render: {shadows: true}
 lights:
-  - {{type: point, position: [2, 4, 3], intensity: 25}}
+  - {type: point, position: [2, 4, 3], intensity: 25}
 materials:
-  clay: {{diffuse: [0.7, 0.6, 0.5], specular: 0.2, shininess: 32}}
+  clay: {diffuse: [0.7, 0.6, 0.5], specular: 0.2, shininess: 32}
 objects:
   - name: torus
     material: clay

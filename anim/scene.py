@@ -59,7 +59,7 @@ def _check_times(times, scene_path, key):
     return times
 
 
-def _track(track, width, scene_path, key, extrapolate):
+def _track(track, width, scene_path, key):
     """A translation/scale Curve from rows [t, values...]."""
     rows = track.keys
     if not rows:
@@ -105,13 +105,13 @@ class SceneObject:
             tr = spec.transform
             if tr is not None:
                 if tr.translation is not None:
-                    t, v = _track(tr.translation, 3, scene_path, f"{key}.transform.translation", spec.extrapolate)
+                    t, v = _track(tr.translation, 3, scene_path, f"{key}.transform.translation")
                     self.translation = Curve(t, v, tr.translation.interpolation, spec.extrapolate)
                 if tr.scale is not None:
-                    t, v = _track(tr.scale, 3, scene_path, f"{key}.transform.scale", spec.extrapolate)
+                    t, v = _track(tr.scale, 3, scene_path, f"{key}.transform.scale")
                     self.scale = Curve(t, v, tr.scale.interpolation, spec.extrapolate)
                 if tr.rotation is not None:
-                    t, q = _track(tr.rotation, 4, scene_path, f"{key}.transform.rotation", spec.extrapolate)
+                    t, q = _track(tr.rotation, 4, scene_path, f"{key}.transform.rotation")
                     norms = np.linalg.norm(q, axis=1)
                     if np.any(norms < 1e-12):
                         raise SceneError(scene_path, f"{key}.transform.rotation.keys", "zero quaternion")

@@ -237,8 +237,8 @@ def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
 
 
 @kernel
-def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, n_live, k_ref, w_end,
-         sub, sub_active, sub_done, sub_skip, mailbox,
+def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
+         sub, sub_done, sub_skip, mailbox,
          g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile):
     """Walk the grid slice by slice along K for a set-up packet, updating the
     closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry).

@@ -121,8 +121,8 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
         _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, g_lo, g_hi, g_dims,
                     g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
     elif n_live > 0:
-        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, n_live, k_ref, w_end,
-             sub, sub_active, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
+        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, k_ref, w_end,
+             sub, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
              cell_start, cell_tris, tri_verts, eps, counters, tile)
 
 
@@ -304,8 +304,8 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                     g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
                                     counters, tile)
                     elif n_live > 0:
-                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s, n_live,
-                             k_ref, w_end, sub, sub_active, sub_done, sub_skip, mailbox, g_lo, g_dims,
+                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
+                             k_ref, w_end, sub, sub_done, sub_skip, mailbox, g_lo, g_dims,
                              g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
 
 
