@@ -17,12 +17,18 @@ SUB = 8
 
 
 class Hits(NamedTuple):
-    """Closest hits per pixel, row-major from the top: (H*W,) arrays."""
+    """Closest hits per pixel: (H*W,) arrays row-major from the top, or the
+    packet-major arrays trace_camera(row_major=False) returns."""
     t: np.ndarray        # f32 distance along the unit ray (inf on a miss)
     prim: np.ndarray     # i32 triangle index, -1 on a miss
     b1: np.ndarray       # f32 barycentric weight of vertex 1
     b2: np.ndarray       # f32 barycentric weight of vertex 2
     counters: np.ndarray  # (N_COUNTERS,) i64: packets, cells, tests, candidates, fallback rays
+
+
+def _sub_size(packet):
+    """Side of the sub-packets a packet is culled and tested in."""
+    return min(packet, SUB)
 
 
 def _layout(width, height, packet):
@@ -31,7 +37,7 @@ def _layout(width, height, packet):
     threads = numba.get_num_threads()
     tile = tile_size_for(width, height, packet, threads)
     n_tiles = -(-width // tile) * -(-height // tile)
-    return min(packet, SUB), tile, n_tiles, threads
+    return _sub_size(packet), tile, n_tiles, threads
 
 
 def _cull_eps(grid: Grid) -> np.float32:
@@ -57,7 +63,7 @@ class CameraBuffers(NamedTuple):
 
 
 def camera_buffers(width, height, packet) -> CameraBuffers:
-    sub = min(packet, SUB)
+    sub = _sub_size(packet)
     n_packets = -(-width // packet) * -(-height // packet)
     shape = (n_packets, (packet // sub) ** 2, sub * sub)
     swizzled = (np.empty(shape, np.float32), np.empty(shape, np.int32),
