@@ -12,9 +12,13 @@ import yaml
 from pydantic import ValidationError
 
 from .errors import SceneError
-from .interpolate import Curve, RotationCurve
+from .gltf import GltfObject
+from .interpolate import Curve
 from .mesh_io import load_mesh
+from .rig import Skeleton
 from .schema import SceneFile
+from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
+from .vertex_kernels import skin_into, transform_into
 
 DEFAULT_MATERIAL = {"diffuse": (0.8, 0.8, 0.8), "specular": 0.0, "shininess": 32.0, "texture": None}
 
@@ -50,42 +54,21 @@ def read_scene_file(path) -> SceneFile:
         raise SceneError(path, _key_path(err["loc"]) or "(top)", msg) from None
 
 
-def _check_times(times, scene_path, key):
-    times = np.asarray(times, np.float64)
-    for i in range(1, len(times)):
-        if not times[i] > times[i - 1]:
-            raise SceneError(scene_path, f"{key}.{i}",
-                             f"key time {times[i]} is not after the previous one ({times[i - 1]})")
-    return times
-
-
-def _track(track, width, scene_path, key):
-    """A translation/scale Curve from rows [t, values...]."""
-    rows = track.keys
-    if not rows:
-        raise SceneError(scene_path, f"{key}.keys", "no keys")
-    for i, row in enumerate(rows):
-        if len(row) != 1 + width:
-            raise SceneError(scene_path, f"{key}.keys.{i}", f"expected {1 + width} numbers (t and {width} values), got {len(row)}")
-    arr = np.asarray(rows, np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise SceneError(scene_path, f"{key}.keys", "non-finite number")
-    times = _check_times(arr[:, 0], scene_path, f"{key}.keys")
-    return times, arr[:, 1:]
-
-
 class SceneObject:
-    """One object's geometry and motion; `positions(t)` gives (n_v, 3) f32."""
+    """One object's geometry and motion; `place(t, out)` writes its (n_v, 3) f32
+    positions. Kinds: vertex keyframes (a Curve per vertex coordinate), a mesh
+    with a skeleton (skinning), a glTF file, or a mesh with a TRS transform
+    (one matrix per frame)."""
 
-    def __init__(self, spec, scene_path, index):
+    def __init__(self, spec, scene_path, index, warnings):
         base = Path(scene_path).parent
         key = f"objects.{index}"
+        owner = f"object {spec.name!r}"
         self.name = spec.name
-        self.extrapolate = spec.extrapolate
-        self.curve = None
+        self.curve = self.skeleton = self.gltf = None
         self.translation = self.rotation = self.scale = None
         if spec.keyframes is not None:
-            times = _check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes")
+            times = check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes", owner)
             meshes = [load_mesh(base / k.mesh, scene_path, f"{key}.keyframes.{i}.mesh")
                       for i, k in enumerate(spec.keyframes)]
             v0, self.faces, self.uvs = meshes[0]
@@ -100,36 +83,48 @@ class SceneObject:
                 self.curve = Curve(times, stack, spec.interpolation, spec.extrapolate)
                 if self.curve.constant:
                     self.curve = None
+        elif spec.mesh.lower().endswith((".gltf", ".glb")):
+            self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh")
+            self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
         else:
             self.base, self.faces, self.uvs = load_mesh(base / spec.mesh, scene_path, f"{key}.mesh")
-            tr = spec.transform
-            if tr is not None:
-                if tr.translation is not None:
-                    t, v = _track(tr.translation, 3, scene_path, f"{key}.transform.translation")
-                    self.translation = Curve(t, v, tr.translation.interpolation, spec.extrapolate)
-                if tr.scale is not None:
-                    t, v = _track(tr.scale, 3, scene_path, f"{key}.transform.scale")
-                    self.scale = Curve(t, v, tr.scale.interpolation, spec.extrapolate)
-                if tr.rotation is not None:
-                    t, q = _track(tr.rotation, 4, scene_path, f"{key}.transform.rotation")
-                    norms = np.linalg.norm(q, axis=1)
-                    if np.any(norms < 1e-12):
-                        raise SceneError(scene_path, f"{key}.transform.rotation.keys", "zero quaternion")
-                    self.rotation = RotationCurve(t, q / norms[:, None], spec.extrapolate)
-        self.static = self.curve is None and all(
-            c is None or c.constant for c in (self.translation, self.rotation, self.scale))
-        self.rigid = self.curve is None
+            if spec.skeleton is not None:
+                self.skeleton = Skeleton(spec.skeleton, len(self.base), scene_path, f"{key}.skeleton",
+                                         owner, spec.extrapolate, warnings)
+        tr = spec.transform
+        if tr is not None:
+            if tr.translation is not None:
+                self.translation = vector_curve(tr.translation, scene_path, f"{key}.transform.translation",
+                                                owner, spec.extrapolate)
+            if tr.scale is not None:
+                self.scale = vector_curve(tr.scale, scene_path, f"{key}.transform.scale", owner, spec.extrapolate)
+            if tr.rotation is not None:
+                self.rotation = rotation_curve(tr.rotation, scene_path, f"{key}.transform.rotation", owner,
+                                               spec.extrapolate, warnings)
+        self.has_transform = any(c is not None for c in (self.translation, self.rotation, self.scale))
+        self.rigid = self.curve is None and self.skeleton is None and (self.gltf is None or self.gltf.static)
+        self.static = (self.curve is None
+                       and (self.skeleton is None or self.skeleton.constant)
+                       and (self.gltf is None or self.gltf.static)
+                       and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
 
-    def positions(self, t):
+    def place(self, t, out):
+        """Write the positions at time t into out (n_v, 3) f32."""
         if self.curve is not None:
-            return self.curve(t).astype(np.float32)
-        if self.translation is None and self.rotation is None and self.scale is None:
-            return self.base
-        s = self.scale(t) if self.scale is not None else np.ones(3)
-        r = self.rotation(t) if self.rotation is not None else np.eye(3)
-        tr = self.translation(t) if self.translation is not None else np.zeros(3)
-        m = r * s[None, :]                              # R @ diag(S)
-        return (self.base.astype(np.float64) @ m.T + tr).astype(np.float32)
+            self.curve.eval_into(t, out)
+            return
+        top = trs_matrix(self.translation, self.rotation, self.scale, t) if self.has_transform else None
+        if self.gltf is not None:
+            self.gltf.place(t, out, top)
+        elif self.skeleton is not None:
+            mats = self.skeleton.matrices(t)
+            if top is not None:
+                mats = compose(top, mats)
+            skin_into(self.base, self.skeleton.joint, self.skeleton.weight, np.ascontiguousarray(mats), out)
+        elif top is not None:
+            transform_into(self.base, top, out)
+        else:
+            out[...] = self.base
 
 
 class AnimatedScene:
@@ -153,6 +148,7 @@ class AnimatedScene:
                 self.texture_paths.append(tex_path)
             else:
                 m["texture_index"] = -1
+        self.warnings = []         # e.g. quaternions normalised; the CLI prints them
         self.objects = []
         offset = 0
         faces, mats, uvs = [], [], []
@@ -160,7 +156,7 @@ class AnimatedScene:
         for i, o in enumerate(spec.objects):
             if o.material is not None and o.material not in spec.materials:
                 raise SceneError(self.path, f"objects.{i}.material", f"unknown material {o.material!r}")
-            obj = SceneObject(o, self.path, i)
+            obj = SceneObject(o, self.path, i, self.warnings)
             obj.offset = offset
             mat = self.material_names.index(o.material) if o.material else len(self.material_names)
             textured = self.materials[mat]["texture_index"] >= 0
@@ -181,13 +177,13 @@ class AnimatedScene:
         self.vertices = np.empty((offset, 3), np.float32)
         for obj in self.objects:                      # static objects: placed once
             if obj.static:
-                self.vertices[obj.offset:obj.offset + len(obj.base)] = obj.positions(0.0)
+                obj.place(0.0, self.vertices[obj.offset:obj.offset + len(obj.base)])
         self.moving = [o for o in self.objects if not o.static]
         self._camera_curve = None
         cam = spec.camera
         if cam.keys is not None:
-            times = _check_times([k.t for k in cam.keys], self.path, "camera.keys")
-            vec = np.array([[*k.eye, *k.look_at, *k.up] for k in cam.keys])
+            times = check_times([k.t for k in cam.keys], self.path, "camera.keys", "camera")
+            vec = np.array([[k.eye, k.look_at, k.up] for k in cam.keys])   # three points per key
             self._camera_curve = Curve(times, vec, cam.interpolation)
             self._fov_curve = Curve(times, np.array([k.fov for k in cam.keys]), "linear")
 
@@ -201,7 +197,7 @@ class AnimatedScene:
     def vertices_at(self, t):
         """(n_v, 3) f32 positions at time t; only moving objects are recomputed."""
         for obj in self.moving:
-            self.vertices[obj.offset:obj.offset + len(obj.base)] = obj.positions(t)
+            obj.place(t, self.vertices[obj.offset:obj.offset + len(obj.base)])
         return self.vertices
 
     def camera_at(self, t):
@@ -210,7 +206,7 @@ class AnimatedScene:
         if self._camera_curve is None:
             return tuple(cam.eye), tuple(cam.look_at), tuple(cam.up), cam.fov
         v = self._camera_curve(t)
-        return tuple(v[0:3]), tuple(v[3:6]), tuple(v[6:9]), float(self._fov_curve(t))
+        return tuple(v[0]), tuple(v[1]), tuple(v[2]), float(self._fov_curve(t))
 
     @property
     def light_table(self):

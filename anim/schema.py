@@ -2,14 +2,20 @@
 
 Unknown keys are errors (`extra="forbid"`): a typo must not pass silently.
 Extensions beyond the spec's example (all optional, backward compatible):
-`render.ambient`, `render.grid_density`, lights of `type: directional`.
+`render.ambient`, `render.grid_density`, lights of `type: directional`,
+more interpolation methods (anim/interpolate.py), rotation tracks with
+`slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
+glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`.
 """
-from typing import Annotated, Dict, List, Literal, Optional, Tuple
+from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 Vec3 = Tuple[float, float, float]
-Interp = Literal["linear", "catmull-rom", "cubic"]
+Interp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
+                 "pchip", "akima", "makima"]
+TrackInterp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
+                      "pchip", "akima", "makima", "slerp", "spline"]
 
 
 class Strict(BaseModel):
@@ -93,8 +99,41 @@ class Material(Strict):
 
 
 class Track(Strict):
+    """Rows [t, values...]. Rotation tracks: slerp (or linear) / spline."""
+    interpolation: TrackInterp = "linear"
+    keys: List[List[float]]
+
+
+class AngleTrack(Strict):
+    """Joint angles in degrees, rows [t, a, b, c], about the axes of `order`
+    (scipy's Euler convention: lower case extrinsic, upper case intrinsic)."""
+    order: Annotated[str, Field(pattern=r"^([xyz]{3}|[XYZ]{3})$")] = "xyz"
     interpolation: Interp = "linear"
     keys: List[List[float]]
+
+
+class Joint(Strict):
+    """A joint rotates its vertices about its `origin` (bind-pose position, in
+    mesh coordinates) and carries its children along."""
+    name: str
+    parent: Optional[str] = None
+    origin: Vec3 = (0.0, 0.0, 0.0)
+    rotation: Optional[Track] = None
+    angles: Optional[AngleTrack] = None
+    translation: Optional[Track] = None
+
+    @model_validator(mode="after")
+    def _one_rotation(self):
+        if self.rotation is not None and self.angles is not None:
+            raise ValueError("give 'rotation' (quaternions) or 'angles', not both")
+        return self
+
+
+class Skeleton(Strict):
+    """Linear blend skinning. `weights`: an .npz file with `joints` (n_v, k)
+    joint indices (the order of `joints` below) and `weights` (n_v, k)."""
+    weights: str
+    joints: Annotated[List[Joint], Field(min_length=1)]
 
 
 class Transform(Strict):
@@ -114,6 +153,8 @@ class Object(Strict):
     mesh: Optional[str] = None
     transform: Optional[Transform] = None
     keyframes: Optional[List[Keyframe]] = None
+    skeleton: Optional[Skeleton] = None
+    animation: Optional[Union[int, str]] = None
     interpolation: Interp = "linear"
     extrapolate: Literal["clamp", "loop"] = "clamp"
 
@@ -121,8 +162,13 @@ class Object(Strict):
     def _kind(self):
         if (self.mesh is None) == (self.keyframes is None):
             raise ValueError("needs exactly one of 'mesh' or 'keyframes'")
-        if self.keyframes is not None and self.transform is not None:
-            raise ValueError("'transform' goes with 'mesh', not with 'keyframes'")
+        if self.keyframes is not None and (self.transform is not None or self.skeleton is not None):
+            raise ValueError("'transform' and 'skeleton' go with 'mesh', not with 'keyframes'")
+        is_gltf = self.mesh is not None and self.mesh.lower().endswith((".gltf", ".glb"))
+        if self.animation is not None and not is_gltf:
+            raise ValueError("'animation' selects an animation of a .gltf/.glb mesh")
+        if is_gltf and self.skeleton is not None:
+            raise ValueError("a glTF file brings its own skins; 'skeleton' is for other meshes")
         if self.keyframes is not None and len(self.keyframes) == 0:
             raise ValueError("keyframes is empty")
         return self

@@ -44,6 +44,15 @@ def main():
     """
 
 
+def load_scene(path):
+    """AnimatedScene of path, its warnings printed on stderr."""
+    from anim.scene import AnimatedScene
+    scene = AnimatedScene(path)
+    for message in scene.warnings:
+        click.echo(f"frustrace: warning: {message}", err=True)
+    return scene
+
+
 def parse_frames(text, scene):
     if text is None:
         return scene.frame_numbers
@@ -77,13 +86,12 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
-    from anim.scene import AnimatedScene
     from raycore._jit import set_threads
     from raycore.config import RenderConfig
     from .pipeline import RenderJob, frame_path, render_animation
     from .report import progress, summary_table
 
-    scene = AnimatedScene(anim_yaml)
+    scene = load_scene(anim_yaml)
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     n_threads = set_threads(threads)
@@ -150,8 +158,7 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path):
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
 def check(anim_yaml):
     """Validate ANIM_YAML (schema, meshes, keys) and summarise it; render nothing."""
-    from anim.scene import AnimatedScene
-    scene = AnimatedScene(anim_yaml)
+    scene = load_scene(anim_yaml)
     spec = scene.spec
     moving = sum(1 for o in scene.objects if not o.static)
     click.echo(f"{anim_yaml}: ok")

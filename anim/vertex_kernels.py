@@ -1,0 +1,46 @@
+"""Per-vertex kernels of the animation stage: spline evaluation and linear
+blend skinning. Parallel over vertices, float64 arithmetic (keys may sit at
+1e6 with 1e-3 detail), float32 results straight into the scene's buffer."""
+import numpy as np
+from numba import prange
+
+from raycore._jit import parallel_arith_kernel
+
+
+@parallel_arith_kernel
+def horner_into(c0, c1, c2, c3, s, out):
+    """out[i] = c0 + c1 s + c2 s^2 + c3 s^3 (flat float64 coefficients)."""
+    for i in prange(out.shape[0]):
+        out[i] = np.float32(((c3[i] * s + c2[i]) * s + c1[i]) * s + c0[i])
+
+
+@parallel_arith_kernel
+def skin_into(rest, joint, weight, mats, out):
+    """Linear blend skinning: out[v] = sum_k weight[v,k] * mats[joint[v,k]] @ (rest[v], 1).
+
+    rest (n, 3) f32; joint (n, k) int32; weight (n, k) f32, rows summing to 1;
+    mats (J, 3, 4) f64 (joint pose times inverse bind)."""
+    for v in prange(rest.shape[0]):
+        x, y, z = np.float64(rest[v, 0]), np.float64(rest[v, 1]), np.float64(rest[v, 2])
+        ox = oy = oz = 0.0
+        for k in range(joint.shape[1]):
+            w = np.float64(weight[v, k])
+            if w == 0.0:
+                continue
+            m = mats[joint[v, k]]
+            ox += w * (m[0, 0] * x + m[0, 1] * y + m[0, 2] * z + m[0, 3])
+            oy += w * (m[1, 0] * x + m[1, 1] * y + m[1, 2] * z + m[1, 3])
+            oz += w * (m[2, 0] * x + m[2, 1] * y + m[2, 2] * z + m[2, 3])
+        out[v, 0] = np.float32(ox)
+        out[v, 1] = np.float32(oy)
+        out[v, 2] = np.float32(oz)
+
+
+@parallel_arith_kernel
+def transform_into(rest, mat, out):
+    """Rigid (affine) motion: out[v] = mat @ (rest[v], 1), mat (3, 4) f64."""
+    for v in prange(rest.shape[0]):
+        x, y, z = np.float64(rest[v, 0]), np.float64(rest[v, 1]), np.float64(rest[v, 2])
+        out[v, 0] = np.float32(mat[0, 0] * x + mat[0, 1] * y + mat[0, 2] * z + mat[0, 3])
+        out[v, 1] = np.float32(mat[1, 0] * x + mat[1, 1] * y + mat[1, 2] * z + mat[1, 3])
+        out[v, 2] = np.float32(mat[2, 0] * x + mat[2, 1] * y + mat[2, 2] * z + mat[2, 3])
