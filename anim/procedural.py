@@ -11,27 +11,39 @@ def write_obj(path, vertices, faces):
     Path(path).write_text("\n".join(lines) + "\n")
 
 
-def torus_scene(out_dir, n_keys=9, nu=128, nv=64):
+class TorusScene:
     """A 16,384-triangle torus whose cross-section ripples (vertex keyframes
     with catmull-rom), 1024^2, one point light: the deforming-mesh benchmark
-    of the foundation issue. Writes DIR/anim.yaml and its OBJ keyframes."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
-    w = np.linspace(0, 2 * np.pi, nv, endpoint=False)
-    U, W = np.meshgrid(u, w, indexing="ij")
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
-    a, b = i * nv + j, ((i + 1) % nu) * nv + j
-    c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
-    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
-    keys = []
-    for k in range(n_keys):
-        phase = 2 * np.pi * k / (n_keys - 1)
-        r = 0.35 * (1 + 0.2 * np.sin(3 * U + phase))
-        verts = np.stack([(1 + r * np.cos(W)) * np.cos(U), r * np.sin(W) + 0.5, (1 + r * np.cos(W)) * np.sin(U)], -1)
-        write_obj(out_dir / f"torus_{k:03d}.obj", verts.reshape(-1, 3), faces)
-        keys.append(f"      - {{t: {k * 0.25:.2f}, mesh: torus_{k:03d}.obj}}")
-    (out_dir / "anim.yaml").write_text("""version: 1
+    of the foundation issue. Its exact motion is `exact(t)`."""
+    name = "torus"
+    period = 2.0                          # the ripple's phase turns once in 2 s
+
+    def __init__(self, nu=128, nv=64):
+        u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+        w = np.linspace(0, 2 * np.pi, nv, endpoint=False)
+        self._u, self._w = (a.reshape(-1) for a in np.meshgrid(u, w, indexing="ij"))
+        i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+        a, b = i * nv + j, ((i + 1) % nu) * nv + j
+        c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+        self.faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                                     np.stack([a, c, d], -1).reshape(-1, 3)])
+
+    def exact(self, t):
+        """(n_v, 3) float64 vertex positions at time t (seconds)."""
+        U, W = self._u, self._w
+        r = 0.35 * (1 + 0.2 * np.sin(3 * U + 2 * np.pi * t / self.period))
+        return np.stack([(1 + r * np.cos(W)) * np.cos(U), r * np.sin(W) + 0.5, (1 + r * np.cos(W)) * np.sin(U)], -1)
+
+    def write(self, out_dir, n_keys=9):
+        """DIR/anim.yaml and its OBJ keyframes (one period, looped)."""
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        keys = []
+        for k in range(n_keys):
+            t = k * self.period / (n_keys - 1)
+            write_obj(out_dir / f"torus_{k:03d}.obj", self.exact(t), self.faces)
+            keys.append(f"      - {{t: {t:.4f}, mesh: torus_{k:03d}.obj}}")
+        (out_dir / "anim.yaml").write_text("""version: 1
 frames: {start: 0, end: 47, fps: 24}
 output: {path: out/frame_####.exr, resolution: [1024, 1024]}
 camera: {eye: [0, 2.6, 2.9], look_at: [0, 0.4, 0], up: [0, 1, 0], fov: 45}
@@ -49,4 +61,4 @@ objects:
 """ + "\n".join(keys) + "\n")
 
 
-SCENES = {"torus": torus_scene}
+SCENES = {"torus": TorusScene()}

@@ -27,7 +27,7 @@ def scene_file(name: str, workdir: Path) -> Path:
     if name not in PROCEDURAL:
         raise SceneError("--scene", "", f"unknown scene {name!r}; built-in: {', '.join(SCENE_NAMES)}")
     out = workdir / name
-    PROCEDURAL[name](out)
+    PROCEDURAL[name].write(out)
     return out / "anim.yaml"
 
 

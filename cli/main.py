@@ -132,9 +132,18 @@ def _int_list(text, name, allowed=None):
 @click.option("--accel", default="grid", show_default=True, help="Acceleration structures, comma-separated (grid).")
 @click.option("--packet", "packets", default="8,16,32", show_default=True, help="Packet sizes to compare, comma-separated.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the rows as JSON.")
-def bench(scenes, res, n_frames, accel, packets, threads, json_path):
-    """Measure fps per phase (interp, build, trace, shade, shadow) on built-in scenes."""
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the rows as JSON (with --error: the error report).")
+@click.option("--error", "error_report", is_flag=True,
+              help="Instead of fps: interpolation error against run time for every method and key "
+                   "spacing on the scenes that know their exact motion, plus a bouncing-ball stiff case; "
+                   "prints measured convergence orders and writes a JSON and a log-log plot.")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="With --error: where to write the plot (default interp_error.png; the JSON goes "
+                   "next to it unless --json is given).")
+def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_report, plot_path):
+    """Measure fps per phase (interp, build, trace, shade, shadow) on built-in scenes,
+    or with --error the interpolation error against run time."""
     import json
     from raycore._jit import set_threads
     from .bench import SCENE_NAMES, run_bench
@@ -143,6 +152,17 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path):
     unknown = [n for n in names if n not in SCENE_NAMES]
     if unknown:
         raise click.BadParameter(f"unknown scene {unknown[0]!r}; built-in: {', '.join(SCENE_NAMES)}", param_hint="--scene")
+    if error_report:
+        from .error_bench import print_report, run_error_report, write_report
+        report = run_error_report(names)
+        if not report["scenes"]:
+            raise click.BadParameter("none of these scenes knows its exact motion", param_hint="--scene")
+        print_report(report)
+        plot_path = plot_path or Path("interp_error.png")
+        json_path = json_path or plot_path.with_suffix(".json")
+        write_report(report, plot_path, json_path)
+        click.echo(f"wrote {plot_path} and {json_path}")
+        return
     accels = [a.strip() for a in accel.split(",") if a.strip()]
     if accels != ["grid"]:
         raise click.BadParameter("only 'grid' is available (the kd-tree comes with issue 6)", param_hint="--accel")

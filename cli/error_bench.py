@@ -1,0 +1,101 @@
+"""`frustrace bench --error`: interpolation error against run time on the
+built-in scenes that know their exact motion, plus the bouncing-ball stiff
+case. Prints tables, writes one JSON and one plot (log-log)."""
+import json
+import platform
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from anim.error_report import bounce_overshoot, measure
+from anim.procedural import SCENES as PROCEDURAL
+
+FPS = 24.0     # frames per second used to amortise fitting over a period
+
+
+def run_error_report(names):
+    """{'scenes': {name: measure(...)}, 'bounce': rows} for scenes with exact motion."""
+    scenes = {}
+    for name in names:
+        gen = PROCEDURAL.get(name)
+        if gen is None or not hasattr(gen, "exact"):
+            continue
+        result = measure(gen.exact, 0.0, gen.period)
+        frames = max(1.0, gen.period * FPS)
+        for r in result["rows"]:                   # per-frame cost with the fit amortised
+            r["frame_cost_ms"] = r["eval_ms"] + r["build_ms"] / frames
+        result["vertices"] = int(gen.exact(0.0).shape[0])
+        scenes[name] = result
+    return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
+            "bounce": bounce_overshoot()}
+
+
+def print_report(report):
+    console = Console() if Console().is_terminal else Console(width=160)
+    for name, res in report["scenes"].items():
+        finest = {r["method"]: r for r in res["rows"]}         # the last row per method
+        table = Table(title=f"{name}: interpolation error vs keyframe spacing "
+                            f"({res['vertices']} moving vertices; finest spacing "
+                            f"{min(r['spacing'] for r in res['rows']):.4g} s)")
+        for col in ("method", "order expected", "order measured", "interior", "max err", "rms err",
+                    "eval ms/frame", "fit ms"):
+            table.add_column(col, justify="right")
+        for method, o in res["orders"].items():
+            r = finest[method]
+            table.add_row(method, str(o["expected"]), f"{o['measured']:.2f}", f"{o['measured_interior']:.2f}",
+                          f"{r['max_err']:.2e}", f"{r['rms_err']:.2e}", f"{r['eval_ms']:.3f}", f"{r['build_ms']:.1f}")
+        console.print(table)
+    table = Table(title="bounce (velocity jump at each contact): lowest height reached; < 0 = through the floor")
+    densities = sorted({r["keys_per_second"] for r in report["bounce"]})
+    table.add_column("method")
+    for d in densities:
+        table.add_column(f"{d} keys/s", justify="right")
+    for d in densities:
+        table.add_column(f"max err {d}/s", justify="right")
+    methods = list(dict.fromkeys(r["method"] for r in report["bounce"]))
+    by = {(r["method"], r["keys_per_second"]): r for r in report["bounce"]}
+    for m in methods:
+        table.add_row(m, *(f"{by[m, d]['min_height']:+.1e}" for d in densities),
+                      *(f"{by[m, d]['max_err']:.1e}" for d in densities))
+    console.print(table)
+
+
+def write_report(report, plot_path: Path, json_path: Path):
+    """JSON with every row, and one figure: error vs spacing, error vs cost, bounce."""
+    import matplotlib
+    import matplotlib.ticker
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    json_path.parent.mkdir(parents=True, exist_ok=True)
+    json_path.write_text(json.dumps(report, indent=1))
+    plot_path.parent.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
+    for name, res in report["scenes"].items():
+        for method in res["orders"]:
+            rows = [r for r in res["rows"] if r["method"] == method]
+            o = res["orders"][method]
+            label = f"{name} {method} (p={o['measured']:.1f}, interior {o['measured_interior']:.1f})"
+            axes[0].loglog([r["spacing"] for r in rows], [r["max_err"] for r in rows], "o-", label=label)
+            axes[1].loglog([r["frame_cost_ms"] for r in rows], [r["max_err"] for r in rows], "o-", label=label)
+    axes[0].set(xlabel="key spacing h (s)", ylabel="max vertex error", title="error vs keyframe spacing")
+    axes[1].set(xlabel="interpolation ms per frame (fit amortised over a period at 24 fps)",
+                ylabel="max vertex error", title="error vs run time")
+    axes[0].legend(fontsize=7)
+    for ax in axes[:2]:
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    methods = list(dict.fromkeys(r["method"] for r in report["bounce"]))
+    densities = sorted({r["keys_per_second"] for r in report["bounce"]})
+    width = 0.8 / len(densities)
+    for i, d in enumerate(densities):
+        vals = [next(r["min_height"] for r in report["bounce"] if r["method"] == m and r["keys_per_second"] == d)
+                for m in methods]
+        axes[2].bar([j + i * width for j in range(len(methods))], vals, width, label=f"{d} keys/s")
+    axes[2].axhline(0, color="k", lw=0.8)
+    axes[2].set_xticks([j + 0.4 - width / 2 for j in range(len(methods))], methods, rotation=45)
+    axes[2].set(ylabel="lowest height (floor at 0)", title="bounce: through the floor?")
+    axes[2].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(plot_path, dpi=110)
+    plt.close(fig)
