@@ -192,7 +192,8 @@ class GltfObject:
                         "targets": [self.accessor(t["POSITION"]).astype(np.float32)
                                     for t in (prim.targets or []) if t.get("POSITION") is not None],
                         "mesh": node.mesh, "skin": None}
-                weights = node.weights if node.weights is not None else mesh.weights
+                weights = getattr(node, "weights", None)       # pygltflib drops node.weights
+                weights = weights if weights is not None else mesh.weights
                 inst["morph_weights"] = np.asarray(weights if weights is not None else
                                                    [0.0] * len(inst["targets"]), np.float64)
                 if node.skin is not None and attrs.JOINTS_0 is not None and attrs.WEIGHTS_0 is not None:
