@@ -158,6 +158,7 @@ class AnimatedScene:
                 raise SceneError(self.path, f"objects.{i}.material", f"unknown material {o.material!r}")
             obj = SceneObject(o, self.path, i, self.warnings)
             obj.offset = offset
+            obj.face_offset = sum(len(f) for f in faces)
             mat = self.material_names.index(o.material) if o.material else len(self.material_names)
             textured = self.materials[mat]["texture_index"] >= 0
             any_uv_needed |= textured and obj.uvs is not None
@@ -186,6 +187,15 @@ class AnimatedScene:
             vec = np.array([[k.eye, k.look_at, k.up] for k in cam.keys])   # three points per key
             self._camera_curve = Curve(times, vec, cam.interpolation)
             self._fov_curve = Curve(times, np.array([k.fov for k in cam.keys]), "linear")
+
+    @property
+    def moving_triangles(self):
+        """Ids of the triangles of moving objects, or None when nothing is
+        static (then every frame simply rebuilds everything)."""
+        if all(not o.static for o in self.objects):
+            return None
+        ids = [np.arange(o.face_offset, o.face_offset + len(o.faces)) for o in self.moving]
+        return np.concatenate(ids).astype(np.int32) if ids else np.zeros(0, np.int32)
 
     @property
     def frame_numbers(self):

@@ -23,6 +23,7 @@ from raycore.config import RenderConfig
 from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
 from raycore.image_io import read_texture, write_exr
 from raycore.mesh import vertex_face_csr
+from raycore.scene_grid import SceneGrid
 
 VERSION = "0.1.0"
 MAX_PENDING_WRITES = 0
@@ -94,6 +95,9 @@ class SceneRenderer:
         self.scene, self.cfg, self.shading = scene, cfg, shading
         self.vf = vertex_face_csr(scene.faces, scene.n_vertices)
         self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
+        # static objects: gathered, binned and given normals once (raycore/scene_grid.py)
+        self.scene_grid = SceneGrid(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
+                                    scene.moving_triangles)
 
     def render(self, t):
         """(interp_ms, FrameResult) of the frame at time t."""
@@ -103,7 +107,7 @@ class SceneRenderer:
         pose = CameraPose(*scene.camera_at(t))
         interp_ms = (time.perf_counter() - t0) * 1e3
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
-        return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers)
+        return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid)
 
 
 def warm_up(scene, shading, cfg, t) -> float:

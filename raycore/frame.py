@@ -8,13 +8,11 @@ the AOV writes when none are asked for.
 import time
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
 from .camera import camera_basis
 from .config import RenderConfig
-from .grid_build import build_grid, point_bounds
-from .mesh import gather_triangles, vertex_normals
+from .scene_grid import SceneGrid
 from .shade import shade_pixels
 from .trace import camera_buffers, trace_camera, trace_light
 
@@ -81,27 +79,25 @@ class FrameBuffers:
 
 
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
-                 buffers: FrameBuffers = None) -> FrameResult:
-    """Render one frame. Pass the same `buffers` for consecutive frames to
-    reuse work arrays; the returned images are always fresh arrays."""
+                 buffers: FrameBuffers = None, scene_grid: SceneGrid = None) -> FrameResult:
+    """Render one frame. Pass the same `buffers` and `scene_grid` for
+    consecutive frames to reuse work arrays and static geometry; the returned
+    images are always fresh arrays."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
         buffers = FrameBuffers(W, H, n_lights, cfg.packet)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
+    if scene_grid is None:
+        scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
     t0 = time.perf_counter()
-    tri_verts = np.empty((geom.faces.shape[0], 9), np.float32)
-    gather_triangles(geom.vertices, geom.faces, tri_verts)
-    # the vertices bound every triangle and are fewer than its corners
-    bounds = point_bounds(geom.vertices, numba.get_num_threads()) if len(geom.vertices) else None
-    grid = build_grid(tri_verts, cfg.grid_density, bounds=bounds)
+    grid, tri_verts = scene_grid.update(geom.vertices)
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
     counters["grid_dims"] = [int(d) for d in grid.dims]
 
     t0 = time.perf_counter()
-    normals = np.empty((geom.vertices.shape[0], 3), np.float32)
-    vertex_normals(tri_verts, geom.vf_start, geom.vf_faces, normals)
+    normals = scene_grid.normals_now()
     timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
 
     cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)

@@ -202,35 +202,83 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     return cell_start, cell_tris
 
 
+class GridShape(NamedTuple):
+    """Where the cells are: everything of a Grid but its triangle lists."""
+    lo: np.ndarray
+    hi: np.ndarray
+    dims: np.ndarray
+    cell_size: np.ndarray
+    inv_cell: np.ndarray
+    pad: np.float32
+
+    def same_as(self, other) -> bool:
+        return (other is not None and np.array_equal(self.lo, other.lo)
+                and np.array_equal(self.hi, other.hi) and np.array_equal(self.dims, other.dims))
+
+
+def grid_shape(lo, hi, n_tris: int, density: float) -> GridShape:
+    """Cells for n_tris triangles inside the finite box (lo, hi), widened a
+    little so that no triangle touches the outer faces."""
+    lo64, hi64 = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    extent = hi64 - lo64
+    size = max(float(extent.max()), float(np.abs(np.concatenate([lo64, hi64])).max()) * 1e-6, 1e-30)
+    pad = EPS_GRID_REL * size
+    lo64 = lo64 - 2 * pad
+    hi64 = hi64 + 2 * pad
+    dims = grid_dims(hi64 - lo64 - 4 * pad, n_tris, density)
+    cell = (hi64 - lo64) / dims
+    return GridShape(lo64.astype(np.float32), hi64.astype(np.float32), dims, cell.astype(np.float32),
+                     (1.0 / cell).astype(np.float32), np.float32(pad))
+
+
+def finite_bounds(tri_verts, bounds, n_chunks):
+    """`bounds` if given and finite, else the box of the finite triangles (a
+    unit box for none)."""
+    if bounds is not None:
+        lo, hi = bounds
+    else:
+        lo, hi = point_bounds(tri_verts.reshape(-1, 3), n_chunks) if len(tri_verts) else _finite_bounds(tri_verts)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        lo, hi = _finite_bounds(tri_verts)
+    if not np.all(np.isfinite(lo)):            # empty scene: a unit box, no triangles
+        lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
+    return lo, hi
+
+
+def bin_triangles(tri_verts, shape: GridShape, n_chunks: int):
+    """(cell_start, cell_tris) of tri_verts (n, 9) in the cells of `shape`."""
+    n_chunks = max(1, min(n_chunks, max(len(tri_verts), 1)))
+    return _fill(tri_verts, shape.lo, shape.inv_cell, shape.dims, shape.pad, n_chunks)
+
+
 def build_grid(tri_verts: np.ndarray, density: float = 0.25, n_chunks: int = 0,
                bounds=None) -> Grid:
     """Build the grid over tri_verts (n, 9) f32. `n_chunks` 0 = one per thread.
     `bounds` (lo, hi): a box around every triangle, e.g. point_bounds of the
     mesh vertices (cheaper than reading all triangle corners)."""
     import numba
-    n = tri_verts.shape[0]
     if n_chunks <= 0:
         n_chunks = numba.get_num_threads()
-    n_chunks = max(1, min(n_chunks, max(n, 1)))
-    if bounds is not None:
-        lo, hi = bounds
-    else:
-        lo, hi = point_bounds(tri_verts.reshape(-1, 3), n_chunks) if n > 0 else _finite_bounds(tri_verts)
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        lo, hi = _finite_bounds(tri_verts)
-    if not np.all(np.isfinite(lo)):            # empty scene: a unit box, no triangles
-        lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
-    lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
-    extent = hi64 - lo64
-    size = max(float(extent.max()), float(np.abs(np.concatenate([lo64, hi64])).max()) * 1e-6, 1e-30)
-    pad = EPS_GRID_REL * size
-    lo64 -= 2 * pad
-    hi64 += 2 * pad
-    dims = grid_dims(hi64 - lo64 - 4 * pad, n, density)
-    cell = (hi64 - lo64) / dims
-    grid_lo = lo64.astype(np.float32)
-    grid_hi = hi64.astype(np.float32)
-    cell_size = cell.astype(np.float32)
-    inv_cell = (1.0 / cell).astype(np.float32)
-    cell_start, cell_tris = _fill(tri_verts, grid_lo, inv_cell, dims, np.float32(pad), n_chunks)
-    return Grid(grid_lo, grid_hi, dims, cell_size, inv_cell, cell_start, cell_tris)
+    lo, hi = finite_bounds(tri_verts, bounds, max(1, min(n_chunks, max(len(tri_verts), 1))))
+    shape = grid_shape(lo, hi, tri_verts.shape[0], density)
+    cell_start, cell_tris = bin_triangles(tri_verts, shape, n_chunks)
+    return Grid(shape.lo, shape.hi, shape.dims, shape.cell_size, shape.inv_cell, cell_start, cell_tris)
+
+
+@parallel_arith_kernel
+def merge_cells(a_start, a_tris, b_start, b_tris, b_ids, out_start, out_tris):
+    """Per cell: the triangles of list a, then those of list b mapped through
+    b_ids (local -> scene triangle id). out_start = a_start + b_start."""
+    n_cells = a_start.shape[0] - 1
+    for c in prange(n_cells + 1):
+        out_start[c] = a_start[c] + b_start[c]
+    for c in prange(n_cells):
+        o = out_start[c]
+        a0 = a_start[c]
+        na = a_start[c + 1] - a0
+        for i in range(na):
+            out_tris[o + i] = a_tris[a0 + i]
+        o += na
+        b0 = b_start[c]
+        for i in range(b_start[c + 1] - b0):
+            out_tris[o + i] = b_ids[b_tris[b0 + i]]

@@ -5,7 +5,7 @@
 """
 import numpy as np
 
-from ._jit import parallel_arith_kernel
+from ._jit import helper, parallel_arith_kernel
 from numba import prange
 
 
@@ -18,6 +18,20 @@ def gather_triangles(vertices, faces, tri_verts):
             tri_verts[t, 3 * k + 0] = vertices[v, 0]
             tri_verts[t, 3 * k + 1] = vertices[v, 1]
             tri_verts[t, 3 * k + 2] = vertices[v, 2]
+
+
+@parallel_arith_kernel
+def gather_some_triangles(vertices, faces, ids, tri_verts, packed):
+    """Re-gather only triangles `ids` into tri_verts, and also pack them
+    contiguously into packed (len(ids), 9): the moving part of a scene."""
+    for i in prange(ids.shape[0]):
+        t = ids[i]
+        for k in range(3):
+            v = faces[t, k]
+            for a in range(3):
+                x = vertices[v, a]
+                tri_verts[t, 3 * k + a] = x
+                packed[i, 3 * k + a] = x
 
 
 def vertex_face_csr(faces: np.ndarray, n_vertices: int):
@@ -38,25 +52,38 @@ def vertex_face_csr(faces: np.ndarray, n_vertices: int):
 def vertex_normals(tri_verts, vf_start, vf_faces, normals):
     """Area-weighted vertex normals (n_v, 3) f32 from triangle vertices."""
     for v in prange(normals.shape[0]):
-        nx = 0.0
-        ny = 0.0
-        nz = 0.0
-        for j in range(vf_start[v], vf_start[v + 1]):
-            p = tri_verts[vf_faces[j]]
-            e1x = p[3] - p[0]
-            e1y = p[4] - p[1]
-            e1z = p[5] - p[2]
-            e2x = p[6] - p[0]
-            e2y = p[7] - p[1]
-            e2z = p[8] - p[2]
-            nx += e1y * e2z - e1z * e2y
-            ny += e1z * e2x - e1x * e2z
-            nz += e1x * e2y - e1y * e2x
-        length = np.sqrt(nx * nx + ny * ny + nz * nz)
-        if length > 0.0:
-            nx /= length
-            ny /= length
-            nz /= length
-        normals[v, 0] = nx
-        normals[v, 1] = ny
-        normals[v, 2] = nz
+        _vertex_normal(tri_verts, vf_start, vf_faces, normals, v)
+
+
+@parallel_arith_kernel
+def vertex_normals_of(ids, tri_verts, vf_start, vf_faces, normals):
+    """vertex_normals for the vertices `ids` only (the moving ones)."""
+    for i in prange(ids.shape[0]):
+        _vertex_normal(tri_verts, vf_start, vf_faces, normals, ids[i])
+
+
+@helper
+def _vertex_normal(tri_verts, vf_start, vf_faces, normals, v):
+    """Area-weighted normal of vertex v from its incident triangles."""
+    nx = 0.0
+    ny = 0.0
+    nz = 0.0
+    for j in range(vf_start[v], vf_start[v + 1]):
+        p = tri_verts[vf_faces[j]]
+        e1x = p[3] - p[0]
+        e1y = p[4] - p[1]
+        e1z = p[5] - p[2]
+        e2x = p[6] - p[0]
+        e2y = p[7] - p[1]
+        e2z = p[8] - p[2]
+        nx += e1y * e2z - e1z * e2y
+        ny += e1z * e2x - e1x * e2z
+        nz += e1x * e2y - e1y * e2x
+    length = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if length > 0.0:
+        nx /= length
+        ny /= length
+        nz /= length
+    normals[v, 0] = nx
+    normals[v, 1] = ny
+    normals[v, 2] = nz
