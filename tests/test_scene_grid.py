@@ -78,7 +78,7 @@ def test_frame_renders_the_same_alone_or_in_sequence(tmp_path):
       translation: {interpolation: catmull-rom, keys: [[0, -1, 0.5, 0], [1, 0, 1.5, 0], [2, 1, 0.5, 0]]}
 """)
     scene = AnimatedScene(path)
-    assert scene.moving_triangles is not None and len(scene.moving_triangles) == len(scene.objects[1].faces)
+    assert scene.moving_triangles is not None and len(scene.moving_triangles) == len(scene.objects[2].faces)
     cfg = RenderConfig(width=64, height=48, packet=8, threads=0, spp=1, shadows=True)
     seq = SceneRenderer(scene, cfg, shading_of(scene))
     assert seq.scene_grid.incremental
