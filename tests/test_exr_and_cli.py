@@ -112,3 +112,17 @@ def test_bench_writes_spec_rows(tmp_path):
 def test_bench_rejects_unknown_scene_and_packet():
     assert CliRunner().invoke(main, ["bench", "--scene", "nope"]).exit_code == 2
     assert CliRunner().invoke(main, ["bench", "--packet", "12"]).exit_code == 2
+
+
+def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
+    import json
+    plot = tmp_path / "err.png"
+    res = CliRunner().invoke(main, ["bench", "--scene", "torus", "--error", "--plot", str(plot)])
+    assert res.exit_code == 0, res.output
+    report = json.loads(plot.with_suffix(".json").read_text())
+    assert plot.stat().st_size > 10000
+    orders = report["scenes"]["torus"]["orders"]
+    assert abs(orders["linear"]["measured"] - 2) < 0.2 and abs(orders["cubic"]["measured"] - 4) < 0.3
+    assert "order measured" in res.output and "bounce" in res.output
+    pchip = [r for r in report["bounce"] if r["method"] == "pchip"]
+    assert pchip and all(r["min_height"] >= 0 for r in pchip)

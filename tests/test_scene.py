@@ -136,3 +136,38 @@ def test_shadows_off_and_no_lights_leave_out_the_shadow_pass(tmp_path):
     unlit = render(scene, 1, shadows=False)
     assert lit.counters["shadow_rays"] > 0 and unlit.counters["shadow_rays"] == 0
     assert lit.rgba[..., :3].sum() < unlit.rgba[..., :3].sum()   # the ball casts a shadow
+
+
+SPEC_EXAMPLE = """
+version: 1
+frames: {start: 0, end: 47, fps: 24}        # frame f is rendered at t = f / fps
+output: {path: out/frame_####.exr, resolution: [1024, 1024], aovs: [N]}
+camera: {eye: [0, 1.5, 6], look_at: [0, 0.8, 0], up: [0, 1, 0], fov: 40}
+render: {accel: grid, packet: 8, shadows: true, spp: 1, background: [0.02, 0.02, 0.03]}
+lights:
+  - {type: point, position: [4, 6, 5], color: [1, 1, 1], intensity: 60}
+materials:
+  skin: {diffuse: [0.8, 0.6, 0.5], specular: 0.1, shininess: 32, texture: skin.png}
+objects:
+  - name: hand                      # deforming mesh: vertex-position keyframes
+    material: skin
+    interpolation: catmull-rom      # linear | catmull-rom | cubic
+    extrapolate: clamp              # clamp | loop
+    keyframes:
+      - {t: 0.0, mesh: hand/key_000.obj}
+      - {t: 0.5, mesh: hand/key_001.obj}
+  - name: marble                    # rigid mesh moved by TRS tracks
+    mesh: sphere.obj
+    transform:
+      translation: {interpolation: catmull-rom, keys: [[0.0, 0, 1, 0], [1.0, 2, 1, 0]]}
+      rotation:    {keys: [[0.0, 1, 0, 0, 0], [1.0, 0, 0, 1, 0]]}   # t, w, x, y, z; slerp
+      scale:       {keys: [[0.0, 1, 1, 1]]}
+"""
+
+
+def test_the_spec_example_still_validates():
+    """The schema extensions (skeletons, glTF, more methods) stay backward compatible."""
+    import yaml
+    from anim.schema import SceneFile
+    spec = SceneFile.model_validate(yaml.safe_load(SPEC_EXAMPLE))
+    assert spec.objects[0].interpolation == "catmull-rom" and spec.objects[1].transform.rotation is not None
