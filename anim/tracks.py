@@ -18,7 +18,7 @@ def check_times(times, scene_path, key, owner=""):
         if i and not times[i] > times[i - 1]:
             what = "repeats" if times[i] == times[i - 1] else "is before"
             raise SceneError(scene_path, f"{key}.{i}",
-                             f"{who}key {i} time {times[i]!r} {what} key {i - 1} ({times[i - 1]!r}); "
+                             f"{who}key {i} time {float(times[i])!r} {what} key {i - 1} ({float(times[i - 1])!r}); "
                              "key times must increase")
     return times
 
