@@ -8,14 +8,14 @@ import tempfile
 from pathlib import Path
 
 from anim.errors import SceneError
-from anim.procedural import SCENES as PROCEDURAL
+from anim import builtin
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 
 from .pipeline import SceneRenderer, fps_of, median_ms, shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
-SCENE_NAMES = ("demo", *PROCEDURAL)
+SCENE_NAMES = ("demo", *builtin.SCENES)
 
 
 def scene_file(name: str, workdir: Path) -> Path:
@@ -24,11 +24,10 @@ def scene_file(name: str, workdir: Path) -> Path:
         if not DEMO.is_file():
             raise SceneError(DEMO, "", "the demo scene ships with the source tree only")
         return DEMO
-    if name not in PROCEDURAL:
+    if name not in builtin.SCENES:
         raise SceneError("--scene", "", f"unknown scene {name!r}; built-in: {', '.join(SCENE_NAMES)}")
     out = workdir / name
-    PROCEDURAL[name].write(out)
-    return out / "anim.yaml"
+    return builtin.get(name).write(out)
 
 
 def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int) -> dict:

@@ -9,7 +9,7 @@ from rich.console import Console
 from rich.table import Table
 
 from anim.error_report import bounce_overshoot, measure
-from anim.procedural import SCENES as PROCEDURAL
+from anim import builtin
 
 FPS = 24.0     # frames per second used to amortise fitting over a period
 
@@ -18,9 +18,9 @@ def run_error_report(names):
     """{'scenes': {name: measure(...)}, 'bounce': rows} for scenes with exact motion."""
     scenes = {}
     for name in names:
-        gen = PROCEDURAL.get(name)
-        if gen is None or not hasattr(gen, "exact"):
+        if name not in builtin.SCENES:
             continue
+        gen = builtin.get(name)
         result = measure(gen.exact, 0.0, gen.period)
         frames = max(1.0, gen.period * FPS)
         for r in result["rows"]:                   # per-frame cost with the fit amortised

@@ -78,3 +78,28 @@ def read_texture(path: str) -> np.ndarray:
     if pixels.shape[2] < 3:
         pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
     return np.ascontiguousarray(pixels[:, :, :3], np.float32)
+
+
+def _write_8bit(path: str, rgb: np.ndarray):
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise OSError(f"{path}: {oiio.geterror()}")
+    try:
+        spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], rgb.shape[2], "uint8")
+        if not (out.open(path, spec) and out.write_image(np.ascontiguousarray(rgb))):
+            raise OSError(f"{path}: {out.geterror()}")
+    finally:
+        out.close()
+
+
+def write_texture(path: str, pixels: np.ndarray):
+    """An 8-bit image file (PNG by extension) from (H, W, 3) values in [0, 1]."""
+    _write_8bit(path, (np.clip(pixels, 0, 1) * 255 + 0.5).astype(np.uint8))
+
+
+def exr_to_png(exr_path: str, png_path: str):
+    """Tone-map a frame for previews: RGB over its background, clipped, sRGB encoded."""
+    names, pixels, _ = read_exr(exr_path)
+    rgb = np.clip(pixels[:, :, [names.index(c) for c in "RGB"]], 0.0, 1.0)
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1 / 2.4) - 0.055)
+    _write_8bit(png_path, (srgb * 255 + 0.5).astype(np.uint8))

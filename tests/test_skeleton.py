@@ -5,7 +5,7 @@ import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from anim.procedural import write_obj
+from anim.builtin.authoring import write_obj
 from anim.scene import AnimatedScene
 from cli.main import main
 

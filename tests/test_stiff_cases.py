@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from anim.error_report import bounce_overshoot
 from anim.interpolate import METHODS, Curve, RotationCurve, break_segments
-from anim.procedural import write_obj
+from anim.builtin.authoring import write_obj
 from anim.scene import AnimatedScene
 from cli.main import main
 
