@@ -10,9 +10,8 @@ from pathlib import Path
 from anim.errors import SceneError
 from anim import builtin
 from anim.scene import AnimatedScene
-from raycore.config import RenderConfig
 
-from .pipeline import SceneRenderer, fps_of, median_ms, shading_of
+from .pipeline import SceneRenderer, config_of, fps_of, median_ms, shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
 SCENE_NAMES = ("demo", *builtin.SCENES)
@@ -32,11 +31,7 @@ def scene_file(name: str, workdir: Path) -> Path:
 
 def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int) -> dict:
     scene = AnimatedScene(path)
-    spec = scene.spec
-    cfg = RenderConfig(width=res, height=res, packet=packet, threads=threads,
-                       spp=spec.render.spp, shadows=spec.render.shadows,
-                       grid_density=spec.render.grid_density,
-                       background=tuple(spec.render.background), ambient=spec.render.ambient)
+    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=())
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []

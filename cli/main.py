@@ -87,20 +87,15 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
     from raycore._jit import set_threads
-    from raycore.config import RenderConfig
-    from .pipeline import RenderJob, frame_path, render_animation
+    from .pipeline import RenderJob, config_of, frame_path, render_animation
     from .report import progress, summary_table
 
     scene = load_scene(anim_yaml)
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     n_threads = set_threads(threads)
-    cfg = RenderConfig(width=spec.output.resolution[0], height=spec.output.resolution[1],
-                       packet=int(packet) if packet else spec.render.packet, threads=n_threads,
-                       spp=spp or spec.render.spp, shadows=spec.render.shadows and not no_shadows,
-                       accel=accel or spec.render.accel, grid_density=spec.render.grid_density,
-                       background=tuple(spec.render.background), ambient=spec.render.ambient,
-                       aovs=tuple(spec.output.aovs))
+    cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
+                    shadows=spec.render.shadows and not no_shadows, accel=accel)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"
@@ -125,7 +120,7 @@ def _int_list(text, name, allowed=None):
 
 @main.command()
 @click.option("--scene", "scenes", default="all", show_default=True,
-              help="Built-in scenes, comma-separated, or 'all' (now: demo, torus).")
+              help="Built-in scenes, comma-separated, or 'all': demo, hand, runner, toys, marbles, fairy, torus.")
 @click.option("--res", type=click.IntRange(16, 8192), default=1024, show_default=True, help="Image size N (NxN).")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
               help="Frames per configuration (medians are reported; a warm-up frame comes first).")
@@ -172,6 +167,41 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     if json_path:
         json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(rows, indent=1))
+
+
+@main.group()
+def assets():
+    """Built-in scenes modelled on the classic animated ray tracing benchmarks
+    (hand, runner, toys, marbles, fairy; torus), generated on demand."""
+
+
+@assets.command("list")
+def assets_list():
+    """Name, triangle count (and the classic scene's) and motion of each scene."""
+    from .assets import scene_rows
+    for r in scene_rows():
+        classic = f"(classic scene: {r['target']:,d})" if r["target"] else ""
+        click.echo(f"{r['name']:8s} {r['triangles']:>7,d} triangles {classic:24s} {r['description']}")
+
+
+@assets.command("make")
+@click.argument("name")
+@click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Where to write anim.yaml and its files (default: ./NAME).")
+@click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also render the middle frame at 320x320 to this PNG.")
+def assets_make(name, out_dir, preview_path):
+    """Generate built-in scene NAME (meshes, weights, textures, anim.yaml); deterministic."""
+    from anim import builtin
+    from .assets import make, render_preview
+    if name not in builtin.SCENES:
+        raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.SCENES)}",
+                                 param_hint="NAME")
+    path, seconds = make(name, out_dir or Path(name))
+    click.echo(f"wrote {path} ({seconds:.1f} s)")
+    if preview_path:
+        render_preview(path, preview_path)
+        click.echo(f"wrote {preview_path}")
 
 
 @main.command()

@@ -39,6 +39,18 @@ def frame_path(pattern: str, frame: int) -> str:
     return f"{head}{frame:0{width}d}{tail}"
 
 
+def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
+    """The scene file's render settings, with command-line overrides."""
+    spec = scene.spec
+    base = dict(width=spec.output.resolution[0], height=spec.output.resolution[1],
+                packet=spec.render.packet, spp=spec.render.spp, shadows=spec.render.shadows,
+                accel=spec.render.accel, grid_density=spec.render.grid_density,
+                background=tuple(spec.render.background), ambient=spec.render.ambient,
+                aovs=tuple(spec.output.aovs))
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    return RenderConfig(**base)
+
+
 def shading_of(scene: AnimatedScene) -> Shading:
     """Materials, lights and textures as flat arrays; textures loaded once."""
     texels, info, offset = [], [], 0

@@ -194,6 +194,7 @@ class BuiltinScene:
     exact positions in file order (the order of AnimatedScene's vertices)."""
     name = ""
     description = ""
+    target_triangles = 0        # the classic scene's size this one is modelled on
     period = 1.0                # the motion repeats (or the animation lasts) this long
     frames = (0, 47, 24)
     resolution = (1024, 1024)
@@ -201,6 +202,7 @@ class BuiltinScene:
     def __init__(self):
         self.parts, self.materials, self.textures, self.lights = [], {}, {}, []
         self.camera = ""
+        self.render = ""            # an optional `render:` line of anim.yaml
         self.build()
 
     def build(self):
@@ -213,6 +215,10 @@ class BuiltinScene:
     def exact(self, t):
         return np.concatenate([p.exact(t) for p in self.parts])
 
+    def exact_moving(self, t):
+        """exact(t) of the moving parts only (what interpolation can get wrong)."""
+        return np.concatenate([p.exact(t) for p in self.parts if p.moving])
+
     def write(self, out_dir):
         """Write DIR/anim.yaml with its meshes, weights and textures."""
         from raycore.image_io import write_texture
@@ -224,7 +230,7 @@ class BuiltinScene:
         text = [f"# frustrace built-in scene '{self.name}': {self.description}\n",
                 "version: 1\n", f"frames: {{start: {start}, end: {end}, fps: {fps}}}\n",
                 f"output: {{path: out/{self.name}_####.exr, resolution: [{self.resolution[0]}, {self.resolution[1]}]}}\n",
-                self.camera, "lights:\n"]
+                self.camera, self.render, "lights:\n"]
         text += [f"  - {light}\n" for light in self.lights]
         text.append("materials:\n")
         text += [f"  {name}: {m}\n" for name, m in self.materials.items()]

@@ -24,6 +24,7 @@ FINGERS = [
 
 class HandScene(BuiltinScene):
     name = "hand"
+    target_triangles = 16000           # ../shared/SPEC.md section 6
     description = "palm and five articulated fingers, joint angles, skinned (~16K triangles)"
     period = CYCLE
 

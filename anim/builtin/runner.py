@@ -21,6 +21,7 @@ JOINTS = [("pelvis", -1, (0, 1.0, 0)), ("spine", 0, (0, 1.22, 0)), ("neck", 1, (
 
 class RunnerScene(BuiltinScene):
     name = "runner"
+    target_triangles = 78000           # ../shared/SPEC.md section 6
     description = "a running figure: skeleton, whole-body skinned deformation (~78K triangles)"
     period = STRIDE
 

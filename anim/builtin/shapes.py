@@ -122,12 +122,14 @@ def cone(base_center, height, radius, n_around=16, n_rings=4):
 
 
 def box(lo, hi):
-    """An axis-aligned closed box, 12 triangles."""
+    """An axis-aligned closed box, 12 triangles; each face has its own four
+    vertices, so that vertex normals keep the edges sharp."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     c = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
-    verts = lo + c * (hi - lo)
+    corners = lo + c * (hi - lo)
     quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    faces = [f for a, b, c2, d in quads for f in ((a, b, c2), (a, c2, d))]
+    verts = np.concatenate([corners[list(q)] for q in quads])
+    faces = [f for k in range(6) for f in ((4 * k, 4 * k + 1, 4 * k + 2), (4 * k, 4 * k + 2, 4 * k + 3))]
     return verts, np.array(faces)
 
 

@@ -7,6 +7,7 @@ from .authoring import BuiltinScene, KeyframedPart
 
 class TorusScene(BuiltinScene):
     name = "torus"
+    target_triangles = 0               # not one of the classic scenes
     description = "a rippling torus: vertex keyframes (16K triangles)"
     period = 2.0                          # the ripple's phase turns once in 2 s
 

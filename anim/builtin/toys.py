@@ -11,6 +11,7 @@ from .textures import checker, stripes
 
 LOOP = 4.0                       # every motion repeats after 4 s
 KEYS = np.linspace(0, LOOP, 49)
+WHEEL_TURNS = 8                  # ~ the car's path length / the wheel's circumference
 
 
 def _rz(deg):
@@ -19,6 +20,7 @@ def _rz(deg):
 
 class ToysScene(BuiltinScene):
     name = "toys"
+    target_triangles = 11000           # ../shared/SPEC.md section 6
     description = "rigid toys on TRS tracks plus a wobbling jelly (~11K triangles)"
     period = LOOP
     frames = (0, 95, 24)
@@ -97,7 +99,7 @@ class ToysScene(BuiltinScene):
 
         def motion(t):
             yaw, pos = self._car_frame(t)
-            roll = _rz(-np.degrees(2 * np.pi * 0.85 * t / LOOP / 0.09 * 1.0))
+            roll = _rz(-360 * WHEEL_TURNS * t / LOOP)     # whole turns per loop: periodic
             return (yaw * roll).as_matrix(), pos + yaw.apply([wx, 0.09, wz])
         return motion
 
