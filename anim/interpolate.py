@@ -230,8 +230,10 @@ class RotationCurve:
 
     def __init__(self, times, quats_wxyz, method="slerp", extrapolate="clamp"):
         q = np.asarray(quats_wxyz, np.float64)
+        self.quats = q
         self.times = np.asarray(times, np.float64)
         self.extrapolate = extrapolate
+        self.method = "spline" if method == "spline" else "slerp"
         self.rotations = Rotation.from_quat(q[:, [1, 2, 3, 0]])   # scipy: scalar last
         rel = (self.rotations[0].inv() * self.rotations).magnitude()
         self.constant = len(self.times) == 1 or bool(np.all(rel < 1e-15))

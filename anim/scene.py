@@ -16,6 +16,7 @@ from .gltf import GltfObject
 from .interpolate import Curve
 from .mesh_io import load_mesh
 from .rig import Skeleton
+from .rigid_batch import RigidBatch
 from .schema import SceneFile
 from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from .vertex_kernels import skin_into, transform_into
@@ -180,6 +181,10 @@ class AnimatedScene:
             if obj.static:
                 obj.place(0.0, self.vertices[obj.offset:obj.offset + len(obj.base)])
         self.moving = [o for o in self.objects if not o.static]
+        # rigid movers are placed together (anim/rigid_batch.py), the rest one by one
+        rigid = [o for o in self.moving if o.curve is None and o.skeleton is None and o.gltf is None]
+        self.rigid_batch = RigidBatch(rigid) if rigid else None
+        self.one_by_one = [o for o in self.moving if o not in rigid]
         self._camera_curve = None
         cam = spec.camera
         if cam.keys is not None:
@@ -206,7 +211,9 @@ class AnimatedScene:
 
     def vertices_at(self, t):
         """(n_v, 3) f32 positions at time t; only moving objects are recomputed."""
-        for obj in self.moving:
+        if self.rigid_batch is not None:
+            self.rigid_batch.place(t, self.vertices)
+        for obj in self.one_by_one:
             obj.place(t, self.vertices[obj.offset:obj.offset + len(obj.base)])
         return self.vertices
 
