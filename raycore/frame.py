@@ -133,7 +133,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             for li in range(n_lights):
                 kind = int(shading.lights[li, 0])
                 _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
-                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout)
+                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout,
+                                   (geom.faces, normals))
                 counters["shadow_rays"] += visible
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])

@@ -102,12 +102,16 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
     return Hits(h.t, h.prim, h.b1, h.b2, counters.sum(axis=0))
 
 
+NO_SMOOTH = (np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
+
+
 def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
-                packet=8, jitter=(0.5, 0.5), vis=None, offsets=None):
+                packet=8, jitter=(0.5, 0.5), vis=None, offsets=None, smooth=None):
     """Visibility (H*W,) f32 of one light (kind 0 point at light_vec, 1
     directional along light_vec) from the surface points in `hits`, and the
     (N_COUNTERS,) counters. `vis` may be a reused (H*W,) f32 buffer;
-    `offsets` (row_off, col_off) locate packet-major hits (default row-major)."""
+    `offsets` (row_off, col_off) locate packet-major hits (default row-major);
+    `smooth` (faces, vertex normals): start shadow rays from the smooth surface."""
     row_off, col_off = offsets if offsets is not None else row_major_offsets(width, height)
     sub, tile, n_tiles, threads = _layout(width, height, packet)
     if vis is None:
@@ -118,7 +122,7 @@ def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kin
     trace_shadows(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
                   packet, sub, tile, threads, light_kind, lx, ly, lz, np.float32(EPS_SHADOW_REL),
                   *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
-                  hits.prim, hits.b1, hits.b2, row_off, col_off, vis, counters)
+                  hits.prim, hits.b1, hits.b2, row_off, col_off, *(smooth or NO_SMOOTH), vis, counters)
     return vis, counters.sum(axis=0)
 
 
