@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: render test install bench clean
+.PHONY: render test install bench previews clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -24,9 +24,16 @@ render: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest
 
-## Measure fps per phase on the demo animation.
+## Measure fps per phase on every built-in scene.
 bench: $(STAMP)
 	$(VENV)/bin/frustrace bench
+
+## Regenerate the README's preview images of the built-in scenes (rendered by frustrace).
+SCENES = hand runner toys marbles fairy
+previews: $(STAMP)
+	for s in $(SCENES); do \
+	  $(VENV)/bin/frustrace assets make $$s -o out/assets/$$s --preview assets/previews/$$s.png || exit 1; \
+	done
 
 clean:
 	rm -rf out $(VENV) *.egg-info
