@@ -339,8 +339,8 @@ def unswizzle(sw_t, sw_prim, sw_b1, sw_b2, row_off, col_off, out_t, out_prim, ou
             out_b2[p0 + x] = sw_b2[k]
 
 
-# a shadow ray to a point light stops this fraction short of the light, so a
-# light placed on a surface does not shadow itself
+# a shadow ray to a point light stops this fraction of its length short of
+# the light, so a light placed on a surface does not shadow itself
 SHADOW_T_MAX_FRACTION = np.float32(1.0 - 1e-6)
 
 
@@ -421,13 +421,28 @@ def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
     if dist == F0 or fx * dx + fy * dy + fz * dz <= F0:
         return
     inv = F1 / dist
+    if light_kind == 0:
+        # traced from the light back to the point: a packet's rays then share
+        # their origin and its frustum is a thin cone; from the surface, the
+        # rays of a packet straddling a silhouette start metres apart and
+        # their common frustum sweeps through everything in between (8x the
+        # triangle tests on the runner scene). The segment is the same.
+        rays[OX, j, r] = lx
+        rays[OY, j, r] = ly
+        rays[OZ, j, r] = lz
+        rays[DX, j, r] = -dx * inv
+        rays[DY, j, r] = -dy * inv
+        rays[DZ, j, r] = -dz * inv
+        rays[TMIN, j, r] = dist * (F1 - SHADOW_T_MAX_FRACTION)
+        rays[TMAX, j, r] = dist
+        return
     rays[OX, j, r] = ox
     rays[OY, j, r] = oy
     rays[OZ, j, r] = oz
     rays[DX, j, r] = dx * inv
     rays[DY, j, r] = dy * inv
     rays[DZ, j, r] = dz * inv
-    rays[TMAX, j, r] = dist * SHADOW_T_MAX_FRACTION if light_kind == 0 else INF
+    rays[TMAX, j, r] = INF
 
 
 @parallel_kernel

@@ -12,7 +12,7 @@ from .textures import grass, value_noise
 
 LOOP = 4.0
 SIZE = 30.0
-CAMERA_RADIUS = 8.5
+CAMERA_RADIUS = 6.0
 
 
 def ground_height(x, z):
@@ -80,7 +80,7 @@ class FairyScene(BuiltinScene):
                           "mushroom": "{diffuse: [0.85, 0.1, 0.08], specular: 0.3}",
                           "fairy": "{diffuse: [0.95, 0.75, 0.85], specular: 0.5, shininess: 64}",
                           "wing": "{diffuse: [0.7, 0.9, 1.0], specular: 0.9, shininess: 96}"}
-        self.lights = ["{type: directional, direction: [0.4, 1, 0.3], intensity: 2.2}",
+        self.lights = ["{type: directional, direction: [-0.4, -1, -0.3], intensity: 1.3}",
                        "{type: point, position: [0, 6, 0], intensity: 30}"]
         self.render = "render: {background: [0.55, 0.7, 0.9], ambient: 0.12}\n"
         cam = []
@@ -89,9 +89,9 @@ class FairyScene(BuiltinScene):
             pos = self.path(t)
             a = 2 * np.pi * t / LOOP - 0.9
             x, z = CAMERA_RADIUS * np.cos(a), CAMERA_RADIUS * np.sin(a)
-            eye = (x, ground_height(x, z) + 6.0, z)
+            eye = (x, ground_height(x, z) + 3.0, z)
             cam.append(f"    - {{t: {t:g}, eye: [{eye[0]:.4f}, {eye[1]:.4f}, {eye[2]:.4f}], "
-                       f"look_at: [{pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}], fov: 45}}\n")
+                       f"look_at: [{pos[0]:.4f}, {pos[1]:.4f}, {pos[2]:.4f}], fov: 40}}\n")
         self.camera = "camera:\n  interpolation: catmull-rom\n  keys:\n" + "".join(cam)
 
     @staticmethod

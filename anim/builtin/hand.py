@@ -62,7 +62,7 @@ class HandScene(BuiltinScene):
         self.materials = {"skin": "{diffuse: [0.86, 0.64, 0.52], specular: 0.15, shininess: 24}",
                           "floor": "{diffuse: [1, 1, 1], texture: checker.png}"}
         self.lights = ["{type: point, position: [2.5, 3, 4], intensity: 30}",
-                       "{type: directional, direction: [-0.4, 0.8, 0.6], intensity: 0.35}"]
+                       "{type: directional, direction: [0.4, -0.8, -0.6], intensity: 0.35}"]
         self.camera = "camera: {eye: [0.9, 0.5, 3.4], look_at: [0, 0.25, 0.1], up: [0, 1, 0], fov: 42}\n"
         self.n_joints = len(joints)
 

@@ -67,7 +67,7 @@ class MarblesScene(BuiltinScene):
                           "amber": "{diffuse: [0.9, 0.6, 0.1], specular: 0.8, shininess: 96}",
                           "white": "{diffuse: [0.9, 0.9, 0.88], specular: 0.8, shininess: 96}"}
         self.lights = ["{type: point, position: [1, 4, 2], intensity: 25}",
-                       "{type: directional, direction: [-0.3, 1, 0.5], intensity: 0.4}"]
+                       "{type: directional, direction: [0.3, -1, -0.5], intensity: 0.4}"]
         self.camera = "camera: {eye: [0, 2.9, 3.0], look_at: [0, 0.25, 0], fov: 45}\n"
 
     def _motion(self, p):

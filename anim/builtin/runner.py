@@ -68,7 +68,7 @@ class RunnerScene(BuiltinScene):
         self.materials = {"shirt": "{diffuse: [0.2, 0.45, 0.8], specular: 0.2, shininess: 32}",
                           "ground": "{diffuse: [1, 1, 1], texture: track.png}"}
         self.lights = ["{type: point, position: [3, 5, 4], intensity: 45}",
-                       "{type: directional, direction: [-0.5, 0.7, -0.5], intensity: 0.3}"]
+                       "{type: directional, direction: [0.5, -0.7, 0.5], intensity: 0.3}"]
         self.camera = ("camera:\n  interpolation: catmull-rom\n  keys:\n"
                        "    - {t: 0, eye: [1.0, 1.3, 3.3], look_at: [0, 0.9, 0], fov: 40}\n"
                        "    - {t: 1, eye: [2.7, 1.4, 2.0], look_at: [0, 0.9, 0], fov: 40}\n"
