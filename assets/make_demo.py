@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
+from anim.builtin.shapes import icosphere
+
 HERE = Path(__file__).parent / "demo"
 
 
@@ -46,31 +48,6 @@ def tube(bend, n_around=48, n_along=64, radius=0.18, length=1.6):
     return v.reshape(-1, 3), faces
 
 
-def icosphere(level=3, radius=0.35):
-    t = (1 + 5 ** 0.5) / 2
-    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
-             (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    verts = [np.array(v, float) / np.linalg.norm(v) for v in verts]
-    for _ in range(level):
-        cache, new_faces = {}, []
-
-        def mid(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                m = verts[a] + verts[b]
-                verts.append(m / np.linalg.norm(m))
-                cache[key] = len(verts) - 1
-            return cache[key]
-        for a, b, c in faces:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            new_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = new_faces
-    return np.array(verts) * radius, np.array(faces)
-
-
 def checker(path, n=256, squares=8):
     import OpenImageIO as oiio
     y, x = np.mgrid[0:n, 0:n]
@@ -87,7 +64,7 @@ def main():
     for k, bend in enumerate([0.0, 1.2, 0.0, -1.2, 0.0]):
         v, f = tube(bend)
         write_obj(HERE / f"tube_{k:03d}.obj", v, f)
-    v, f = icosphere()
+    v, f = icosphere(3, 0.35)
     write_obj(HERE / "ball.obj", v, f)
     floor = np.array([[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], float)
     uv = np.array([[0, 0], [2, 0], [2, 2], [0, 2]], float)

@@ -21,8 +21,7 @@ def soup(rng, n, spread=4.0, size=0.3):
 
 
 def icosphere_mesh(level=2, radius=1.0):
-    sys.path.insert(0, str(ROOT / "assets"))
-    from make_demo import icosphere
+    from anim.builtin.shapes import icosphere
     v, f = icosphere(level, radius)
     return v.astype(np.float32), f.astype(np.int32)
 
