@@ -27,10 +27,16 @@ def primary_dir(cam, x, y, jx, jy):
     """Unit direction through pixel (x, y) at sub-pixel offset (jx, jy) in [0,1)
     (0.5, 0.5 = pixel centre); y counts from the top. SPEC's
     u = (2 (x + jx) / W - 1) h aspect, v = (1 - 2 (y + jy) / H) h, in float32."""
-    u = (np.float32(x) + jx) * cam[14] - cam[12]
-    v = cam[13] - (np.float32(y) + jy) * cam[15]
-    dx = cam[3] + u * cam[6] + v * cam[9]
-    dy = cam[4] + u * cam[7] + v * cam[10]
-    dz = cam[5] + u * cam[8] + v * cam[11]
+    dx, dy, dz = primary_dir_raw(cam, x, y, jx, jy)
     inv = np.float32(1.0) / np.sqrt(dx * dx + dy * dy + dz * dz)
     return dx * inv, dy * inv, dz * inv
+
+
+@helper
+def primary_dir_raw(cam, x, y, jx, jy):
+    """primary_dir before normalisation: forward + u right + v up', affine in
+    the pixel position (so a packet's extremes are at its corner rays)."""
+    u = (np.float32(x) + jx) * cam[14] - cam[12]
+    v = cam[13] - (np.float32(y) + jy) * cam[15]
+    return (cam[3] + u * cam[6] + v * cam[9], cam[4] + u * cam[7] + v * cam[10],
+            cam[5] + u * cam[8] + v * cam[11])
