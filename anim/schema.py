@@ -66,7 +66,7 @@ class Camera(Strict):
 
 
 class Render(Strict):
-    accel: Literal["grid"] = "grid"
+    accel: Literal["grid", "kdtree"] = "grid"
     packet: Literal[4, 8, 16, 32] = 32
     shadows: bool = True
     spp: Annotated[int, Field(ge=1, le=1024)] = 1

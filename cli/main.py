@@ -72,7 +72,7 @@ def parse_frames(text, scene):
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
-@click.option("--accel", type=click.Choice(["grid"]), help="Acceleration structure (default: render.accel).")
+@click.option("--accel", type=click.Choice(["grid", "kdtree"]), help="Acceleration structure: the per-frame uniform grid, or an SAH kd-tree with frustum traversal (default: render.accel, grid).")
 @click.option("--packet", type=click.Choice(["4", "8", "16", "32"]), help="Primary-ray packet size N (NxN rays per frustum; default: render.packet, 32 if unset: the fastest in bench).")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")

@@ -12,9 +12,14 @@ import numpy as np
 
 from .camera import camera_basis
 from .config import RenderConfig
+from .kdtree_build import build_kdtree
+from .kdtree_trace import kd_trace_camera, kd_trace_light
 from .scene_grid import SceneGrid
 from .shade import shade_pixels
-from .trace import camera_buffers, trace_camera, trace_light
+from .trace import Hits, camera_buffers, row_major_offsets, trace_camera, trace_light
+
+# kd-tree camera packets: 8x8 rays per frustum (the grid's packet size is cfg.packet)
+KD_PACKET = 8
 
 
 class Geometry(NamedTuple):
@@ -91,10 +96,16 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
+    kd = cfg.accel == "kdtree"
     t0 = time.perf_counter()
-    grid, tri_verts = scene_grid.update(geom.vertices)
+    if kd:
+        tri_verts = scene_grid.gather(geom.vertices)
+        tree = build_kdtree(tri_verts)
+        counters["kd_nodes"] = int(len(tree.axis))
+    else:
+        grid, tri_verts = scene_grid.update(geom.vertices)
+        counters["grid_dims"] = [int(d) for d in grid.dims]
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
-    counters["grid_dims"] = [int(d) for d in grid.dims]
 
     t0 = time.perf_counter()
     normals = scene_grid.normals_now()
@@ -117,9 +128,13 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     first_prim = None
     for jitter in offsets:
         t0 = time.perf_counter()
-        hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera,
-                            row_major=False)
-        layout = (buffers.camera.row_off, buffers.camera.col_off)
+        if kd:
+            hits = Hits(*kd_trace_camera(tree, tri_verts, cam, W, H, KD_PACKET, jitter))
+            layout = row_major_offsets(W, H)
+        else:
+            hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera,
+                                row_major=False)
+            layout = (buffers.camera.row_off, buffers.camera.col_off)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         counters["rays"] += W * H
         counters["cells"] += int(hits.counters[1])
@@ -132,9 +147,13 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             visible = int(np.count_nonzero(hits.prim >= 0))   # padding slots are -1
             for li in range(n_lights):
                 kind = int(shading.lights[li, 0])
-                _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
-                                   shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout,
-                                   (geom.faces, normals))
+                if kd:
+                    _, c = kd_trace_light(tree, tri_verts, cam, W, H, hits, kind, shading.lights[li, 1:4],
+                                          jitter, vis[li], layout, (geom.faces, normals))
+                else:
+                    _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
+                                       shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout,
+                                       (geom.faces, normals))
                 counters["shadow_rays"] += visible
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])

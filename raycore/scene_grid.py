@@ -63,21 +63,30 @@ class SceneGrid:
             self.normals_done = True
         return self.normals
 
-    def update(self, vertices):
-        """(grid, tri_verts) for this frame's vertex positions."""
+    def gather(self, vertices):
+        """This frame's triangle corners (n, 9) f32: all of them, or after the
+        first frame only the moving ones (also packed into self.packed)."""
         threads = numba.get_num_threads()
         if not self.incremental:
             gather_triangles(vertices, self.faces, self.tri_verts)
-            bounds = point_bounds(vertices, threads) if len(vertices) else None
-            lo, hi = finite_bounds(self.tri_verts, bounds, threads)
-            shape = grid_shape(lo, hi, len(self.tri_verts), self.density)
-            start, tris = bin_triangles(self.tri_verts, shape, threads)
-            return self._grid(shape, start, tris), self.tri_verts
+            return self.tri_verts
         if self.first:
             gather_triangles(vertices, self.faces, self.tri_verts)
             self.static_bounds = finite_bounds(self.tri_verts[self.static], None, threads)
             self.first = False
         gather_some_triangles(vertices, self.faces, self.moving, self.tri_verts, self.packed)
+        return self.tri_verts
+
+    def update(self, vertices):
+        """(grid, tri_verts) for this frame's vertex positions."""
+        threads = numba.get_num_threads()
+        self.gather(vertices)
+        if not self.incremental:
+            bounds = point_bounds(vertices, threads) if len(vertices) else None
+            lo, hi = finite_bounds(self.tri_verts, bounds, threads)
+            shape = grid_shape(lo, hi, len(self.tri_verts), self.density)
+            start, tris = bin_triangles(self.tri_verts, shape, threads)
+            return self._grid(shape, start, tris), self.tri_verts
         bounds = self.static_bounds
         if len(self.static) == 0:
             bounds = finite_bounds(self.packed, None, threads)
