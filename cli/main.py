@@ -169,6 +169,46 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
         json_path.write_text(json.dumps(rows, indent=1))
 
 
+@main.command(context_settings={"ignore_unknown_options": False})
+@click.argument("structures", nargs=-1, required=True)
+@click.option("--scene", "scene_name", help="A built-in scene instead of ANIM.yaml (see `assets list`).")
+@click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=8, show_default=True,
+              help="Frames timed per structure (medians; a warm-up frame comes first).")
+@click.option("--res", type=click.IntRange(16, 8192), default=1024, show_default=True, help="Image size N (NxN).")
+@click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the table as JSON.")
+def compare(structures, scene_name, n_frames, res, threads, json_path):
+    """Compare acceleration structures on one scene: `compare grid vs kdtree
+    [ANIM.yaml | --scene NAME]`. Structures: grid, grid-nocull (no frustum
+    culling, no mailboxes), kdtree. Prints build and trace ms, fps, ray/triangle
+    tests and cells/nodes per packet for each, and the largest image difference."""
+    import json
+    import tempfile
+    from raycore._jit import set_threads
+    from .bench import scene_file
+    from .compare import compare as run_compare, parse_structures
+    from .report import compare_table
+    try:
+        names, path = parse_structures(structures)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="STRUCTURES")
+    if (path is None) == (scene_name is None):
+        raise click.BadParameter("give either ANIM.yaml or --scene NAME", param_hint="STRUCTURES")
+    n_threads = set_threads(threads)
+    with tempfile.TemporaryDirectory(prefix="frustrace-compare-") as tmp:
+        if scene_name is not None:
+            from anim import builtin
+            if scene_name not in builtin.SCENES and scene_name != "demo":
+                raise click.BadParameter(f"unknown scene {scene_name!r}", param_hint="--scene")
+            path = scene_file(scene_name, Path(tmp))
+        result = run_compare(Path(path), names, n_frames, res, n_threads)
+    result["threads"] = n_threads
+    compare_table(result)
+    if json_path:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(result, indent=1))
+
+
 @main.group()
 def assets():
     """Built-in scenes modelled on the classic animated ray tracing benchmarks

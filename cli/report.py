@@ -59,3 +59,29 @@ def bench_table(rows):
     if not console.is_terminal:
         console = Console(width=160)      # a pipe or file gets the whole table
     console.print(table)
+
+
+def compare_table(result):
+    """One row per structure, then the image differences against the first."""
+    rows = result["rows"]
+    r0 = rows[0]
+    table = Table(title=f"frustrace compare: {result['scene']}  {r0['triangles']} triangles  "
+                        f"{r0['resolution']}²  {r0['frames']} frames  {result.get('threads', '?')} threads "
+                        "(medians per frame)")
+    for col in ("structure", "packet", "build ms", "trace ms", "shadow ms", "fps_raycast", "fps_full",
+                "primary tests", "all tests", "cells/nodes per packet", "published tests"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        pub = f"{r['published_tests'] / 1e6:.2f}M" if r["published_tests"] else "-"
+        table.add_row(r["structure"], f"{r['packet']}²", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}", f"{r['shadow_ms']:.1f}",
+                      f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}", f"{r['primary_tests'] / 1e6:.2f}M",
+                      f"{r['tri_tests'] / 1e6:.1f}M", f"{r['visits_per_packet']:.1f}", pub)
+    console = Console() if Console().is_terminal else Console(width=170)
+    console.print(table)
+    for d in result["diff"]:
+        console.print(f"{d['b']} vs {d['a']}: {d['hit_mismatch_pixels']} pixels hit/miss differ, "
+                      f"depth max rel diff {d['max_rel_depth_diff']:.2e} "
+                      f"({d['pixels_depth_diff_over_1e-5']} pixels over 1e-5), "
+                      f"max RGBA diff {d['max_rgba_diff']:.3g}")
+    console.print("published tests: Wald et al. 2006 (Coherent Grid Traversal), per frame, for reference; "
+                  "their scenes and resolution differ")

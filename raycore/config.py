@@ -30,3 +30,4 @@ class RenderConfig:
     background: tuple = (0.0, 0.0, 0.0)
     ambient: float = 0.03          # constant ambient term so shadowed areas are not pure black
     aovs: tuple = ()               # extra EXR channels: "N", "P", "id"
+    grid_cull: bool = True         # grid: frustum culling and mailboxes (off only to measure them)

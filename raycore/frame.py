@@ -133,13 +133,17 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             layout = row_major_offsets(W, H)
         else:
             hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera,
-                                row_major=False)
+                                row_major=False, cull=cfg.grid_cull)
             layout = (buffers.camera.row_off, buffers.camera.col_off)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         counters["rays"] += W * H
         counters["cells"] += int(hits.counters[1])
         counters["tri_tests"] += int(hits.counters[2])
         counters["fallback_rays"] += int(hits.counters[4])
+        # primary rays alone (grid: cells; kd-tree: nodes), for `frustrace compare`
+        counters["primary_packets"] = counters.get("primary_packets", 0) + int(hits.counters[0])
+        counters["primary_visits"] = counters.get("primary_visits", 0) + int(hits.counters[1])
+        counters["primary_tests"] = counters.get("primary_tests", 0) + int(hits.counters[2])
 
         t0 = time.perf_counter()
         vis = buffers.vis if cast_shadows else buffers.vis[:0]
@@ -153,7 +157,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                 else:
                     _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
                                        shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout,
-                                       (geom.faces, normals))
+                                       (geom.faces, normals), cfg.grid_cull)
                 counters["shadow_rays"] += visible
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])

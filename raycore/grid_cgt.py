@@ -239,11 +239,13 @@ def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
 @kernel
 def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
          sub, sub_done, sub_skip, mailbox,
-         g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile):
+         g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile, cull):
     """Walk the grid slice by slice along K for a set-up packet, updating the
     closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry).
 
     shared_origin: every ray starts at work[OU/OV/OK, 0, 0] (camera packets).
+    cull False turns off the mailbox and the frustum culling of triangles
+    (packet and sub-packets), for `frustrace compare` to measure what they save.
     The triangle is then tested through its three edge planes through that
     origin, computed once per triangle: per ray only three dot products,
     about half the work of the per-ray Woop shear. It is watertight for the
@@ -313,7 +315,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
                     for jj in range(cell_start[cell], cell_start[cell + 1]):
                         tri = cell_tris[jj]
                         slot = tri & (MAILBOX_SIZE - 1)
-                        if mailbox[slot] == tri:
+                        if cull and mailbox[slot] == tri:
                             continue
                         mailbox[slot] = tri
                         # triangle in the packet's frame: u, v, and w along K
@@ -329,10 +331,10 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
                         wa = (ak - k_ref) * sf
                         wb = (bk - k_ref) * sf
                         wc = (ck - k_ref) * sf
-                        if max(wa, wb, wc) < -eps or min(wa, wb, wc) > w_end + eps:
+                        if cull and (max(wa, wb, wc) < -eps or min(wa, wb, wc) > w_end + eps):
                             continue
                         # packet frustum: all vertices outside one plane -> cull
-                        if _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, n_sub):
+                        if cull and _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, n_sub):
                             continue
                         n_cand += 1
                         if shared_origin:
@@ -365,7 +367,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
                                    | _cull_plane(au, wa, bu, wb, cu, wc, sub[GUMAX, j], sub[UMAX, j], False)
                                    | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMIN, j], sub[VMIN, j], True)
                                    | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False))
-                            sub_skip[j] = out | (sub_done[j] >= ss)
+                            sub_skip[j] = (out & cull) | (sub_done[j] >= ss)
                         for j in range(n_sub):
                             if sub_skip[j]:
                                 continue

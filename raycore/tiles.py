@@ -109,7 +109,7 @@ def _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
 def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub,
                        sub_active, sub_done, sub_skip, mailbox,
                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                       tri_verts, eps, counters, tile):
+                       tri_verts, eps, counters, tile, cull):
     """CGT for a packet of arbitrary rays, or single-ray DDA when the rays
     share no major axis. Fills hit_* (prim -1: nothing before TMAX)."""
     for j in range(rays.shape[1]):
@@ -123,7 +123,7 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
     elif n_live > 0:
         walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, k_ref, w_end,
              sub, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
-             cell_start, cell_tris, tri_verts, eps, counters, tile)
+             cell_start, cell_tris, tri_verts, eps, counters, tile, cull)
 
 
 @helper
@@ -265,7 +265,7 @@ def setup_camera(cam, px, py, packet, sub_size, width, height, jx, jy, off_x, of
 @parallel_kernel
 def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  sw_t, sw_prim, sw_b1, sw_b2, counters):
+                  sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
     """Closest hits of the camera rays (sub-pixel offset jx, jy) for every pixel.
 
     sw_*: packet-major hits (n_packets, n_sub, S*S), packet (px, py) at index
@@ -306,7 +306,8 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                     elif n_live > 0:
                         walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
                              k_ref, w_end, sub, sub_done, sub_skip, mailbox, g_lo, g_dims,
-                             g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile)
+                             g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile,
+                             cull)
 
 
 def swizzle_offsets(width, height, packet, sub_size):
@@ -449,7 +450,8 @@ def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
 def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   light_kind, lx, ly, lz, offset_scale,
                   g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  hit_prim, hit_b1, hit_b2, row_off, col_off, faces, normals, out_vis, counters):
+                  hit_prim, hit_b1, hit_b2, row_off, col_off, faces, normals, out_vis, counters,
+                  cull):
     """Visibility (1 lit, 0 shadowed) of one light from every visible point;
     hits of pixel (x, y) at row_off[y] + col_off[x] (see shade_pixels);
     out_vis must be zeroed by the caller (only lit pixels are written).
@@ -488,7 +490,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                     _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
                                        sub, sub_active, sub_done, sub_skip, mailbox,
                                        g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                                       tri_verts, eps, counters, tile)
+                                       tri_verts, eps, counters, tile, cull)
                     for j in range(n_sub):
                         x0, y0 = _sub_corner(px, py, j, packet, sub_size)
                         for r in range(ss):
@@ -500,7 +502,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
 @parallel_kernel
 def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, any_hit,
                     g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                    out_t, out_prim, out_b1, out_b2, counters):
+                    out_t, out_prim, out_b1, out_b2, counters, cull):
     """Arbitrary rays (n, 3) f32, grouped into packets of packet^2 consecutive
     rays (the caller orders them coherently); same kernels as the camera path.
     counters: (n_packets, N_COUNTERS) int64."""
@@ -529,7 +531,7 @@ def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, an
             _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
                                sub, sub_active, sub_done, sub_skip, mailbox,
                                g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                               tri_verts, eps, counters, pk)
+                               tri_verts, eps, counters, pk, cull)
             for j in range(n_sub):
                 for r in range(ss):
                     i = pk * per_packet + j * ss + r

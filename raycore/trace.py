@@ -79,7 +79,7 @@ def row_major_offsets(width, height):
 
 
 def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.5, 0.5),
-                 out: CameraBuffers = None, row_major=True) -> Hits:
+                 out: CameraBuffers = None, row_major=True, cull=True) -> Hits:
     """Trace one camera ray per pixel (at sub-pixel offset `jitter`); results
     go into `out` (from camera_buffers, same size and packet) when given.
 
@@ -93,7 +93,7 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     trace_primary(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
                   packet, sub, tile, threads, *grid[:5], grid.cell_start, grid.cell_tris,
-                  tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters)
+                  tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
     flat = (sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1))
     if not row_major:
         return Hits(*flat, counters.sum(axis=0))
@@ -106,7 +106,7 @@ NO_SMOOTH = (np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
 
 
 def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
-                packet=8, jitter=(0.5, 0.5), vis=None, offsets=None, smooth=None):
+                packet=8, jitter=(0.5, 0.5), vis=None, offsets=None, smooth=None, cull=True):
     """Visibility (H*W,) f32 of one light (kind 0 point at light_vec, 1
     directional along light_vec) from the surface points in `hits`, and the
     (N_COUNTERS,) counters. `vis` may be a reused (H*W,) f32 buffer;
@@ -122,7 +122,8 @@ def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kin
     trace_shadows(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
                   packet, sub, tile, threads, light_kind, lx, ly, lz, np.float32(EPS_SHADOW_REL),
                   *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
-                  hits.prim, hits.b1, hits.b2, row_off, col_off, *(smooth or NO_SMOOTH), vis, counters)
+                  hits.prim, hits.b1, hits.b2, row_off, col_off, *(smooth or NO_SMOOTH), vis, counters,
+                  cull)
     return vis, counters.sum(axis=0)
 
 
@@ -143,5 +144,5 @@ def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, pac
     counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
     trace_ray_batch(origins, dirs, t_min, t_max, packet, sub, threads, any_hit,
                     *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
-                    out_t, out_prim, out_b1, out_b2, counters)
+                    out_t, out_prim, out_b1, out_b2, counters, True)
     return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))

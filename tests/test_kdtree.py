@@ -168,3 +168,22 @@ def test_kdtree_frames_equal_grid_frames(tmp_path):
     assert np.array_equal(hit_g, hit_k)
     np.testing.assert_allclose(k.z[hit_g], g.z[hit_g], rtol=1e-5)
     assert np.abs(g.rgba - k.rgba).max() < 1e-2
+
+
+def test_compare_command_reports_every_structure(tmp_path):
+    import json
+    from click.testing import CliRunner
+    from cli.main import main
+    out = tmp_path / "c.json"
+    res = CliRunner().invoke(main, ["compare", "grid", "vs", "grid-nocull", "vs", "kdtree", "--scene", "toys",
+                                    "--frames", "1", "--res", "64", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    report = json.loads(out.read_text())
+    rows = {r["structure"]: r for r in report["rows"]}
+    assert set(rows) == {"grid", "grid-nocull", "kdtree"}
+    # culling and mailboxes cut the grid's ray/triangle tests; images agree
+    assert rows["grid-nocull"]["primary_tests"] > 5 * rows["grid"]["primary_tests"]
+    for d in report["diff"]:
+        assert d["hit_mismatch_pixels"] == 0 and d["max_rel_depth_diff"] < 1e-5, d
+    assert CliRunner().invoke(main, ["compare", "grid", "vs", "octree", "--scene", "toys"]).exit_code == 2
+    assert CliRunner().invoke(main, ["compare", "grid", "--scene", "toys"]).exit_code == 2
