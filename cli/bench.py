@@ -11,6 +11,8 @@ from anim.errors import SceneError
 from anim import builtin
 from anim.scene import AnimatedScene
 
+from raycore.frame import KD_PACKET
+
 from .pipeline import SceneRenderer, config_of, fps_of, median_ms, shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
@@ -29,9 +31,10 @@ def scene_file(name: str, workdir: Path) -> Path:
     return builtin.get(name).write(out)
 
 
-def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int) -> dict:
+def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int,
+                accel: str = "grid") -> dict:
     scene = AnimatedScene(path)
-    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=())
+    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=(), accel=accel)
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
@@ -41,7 +44,7 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
             rows.append({"interp_ms": interp_ms, **result.timings,
                          "tri_tests": result.counters["tri_tests"]})
     fps_raycast, fps_full = fps_of(rows)
-    return {"scene": name, "accel": "grid", "packet": packet, "threads": threads,
+    return {"scene": name, "accel": accel, "packet": packet if accel == "grid" else KD_PACKET, "threads": threads,
             "triangles": int(scene.faces.shape[0]), "resolution": res, "frames": len(rows),
             **{k: median_ms(rows, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
                                               "shadow_ms")},
@@ -50,7 +53,12 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
             "tri_tests": median_ms(rows, "tri_tests")}
 
 
-def run_bench(names, res, n_frames, packets, threads):
+def run_bench(names, res, n_frames, packets, threads, accels=("grid",)):
     with tempfile.TemporaryDirectory(prefix="frustrace-bench-") as tmp:
         paths = {n: scene_file(n, Path(tmp)) for n in names}
-        return [bench_scene(paths[n], n, res, n_frames, p, threads) for n in names for p in packets]
+        rows = []
+        for n in names:
+            for accel in accels:      # the kd-tree's packets are always KD_PACKET^2
+                for p in (packets if accel == "grid" else packets[:1]):
+                    rows.append(bench_scene(paths[n], n, res, n_frames, p, threads, accel))
+        return rows

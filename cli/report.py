@@ -41,16 +41,16 @@ def summary_table(stats):
 def bench_table(rows):
     """One line per scene and packet size; the fastest fps_raycast per scene marked."""
     table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
-    for col in ("scene", "tris", "res", "packet", "threads", "build", "trace", "shade", "shadow",
+    for col in ("scene", "accel", "tris", "res", "packet", "threads", "build", "trace", "shade", "shadow",
                 "fps_raycast", "fps_full", "Mrays/s", "tests/ray"):
         table.add_column(col, justify="right")
     best = {}
     for r in rows:
         if r["fps_raycast"] > best.get(r["scene"], (0, None))[0]:
-            best[r["scene"]] = (r["fps_raycast"], r["packet"])
+            best[r["scene"]] = (r["fps_raycast"], (r["accel"], r["packet"]))
     for r in rows:
-        mark = " *" if best[r["scene"]][1] == r["packet"] else ""
-        table.add_row(r["scene"], str(r["triangles"]), str(r["resolution"]), f"{r['packet']}{mark}",
+        mark = " *" if best[r["scene"]][1] == (r["accel"], r["packet"]) else ""
+        table.add_row(r["scene"], r["accel"], str(r["triangles"]), str(r["resolution"]), f"{r['packet']}{mark}",
                       str(r["threads"]), f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
                       f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['fps_raycast']:.1f}",
                       f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",

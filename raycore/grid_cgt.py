@@ -236,6 +236,25 @@ def _culled(au, av, wa, bu, bv, wb, cu, cv, wc, sub, j):
             or _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False))
 
 
+@helper
+def _edge_normal(pu, pv, pk, qu, qv, qk):
+    """p x q for two eye-relative vertices, computed as s x (t - s) with s the
+    lexicographically smaller of the two: no cancellation between two long,
+    nearly parallel vectors (a small far triangle otherwise lost 1e-2 of its
+    barycentric accuracy), and the two triangles sharing an edge still get
+    exact negatives of one vector (watertight: same s, t, opposite sign)."""
+    swap = (pu > qu) or (pu == qu and (pv > qv or (pv == qv and pk > qk)))
+    su, sv, sk = (qu, qv, qk) if swap else (pu, pv, pk)
+    tu, tv, tk = (pu, pv, pk) if swap else (qu, qv, qk)
+    du, dv, dk = tu - su, tv - sv, tk - sk
+    nu = sv * dk - sk * dv
+    nv = sk * du - su * dk
+    nk = su * dv - sv * du
+    if swap:
+        return -nu, -nv, -nk
+    return nu, nv, nk
+
+
 @kernel
 def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
          sub, sub_done, sub_skip, mailbox,
@@ -342,15 +361,9 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
                             xu, xv, xk = au - e_u, av - e_v, ak - e_k
                             yu, yv, yk = bu - e_u, bv - e_v, bk - e_k
                             zu, zv, zk = cu - e_u, cv - e_v, ck - e_k
-                            n0u = yv * zk - yk * zv
-                            n0v = yk * zu - yu * zk
-                            n0k = yu * zv - yv * zu
-                            n1u = zv * xk - zk * xv
-                            n1v = zk * xu - zu * xk
-                            n1k = zu * xv - zv * xu
-                            n2u = xv * yk - xk * yv
-                            n2v = xk * yu - xu * yk
-                            n2k = xu * yv - xv * yu
+                            n0u, n0v, n0k = _edge_normal(yu, yv, yk, zu, zv, zk)
+                            n1u, n1v, n1k = _edge_normal(zu, zv, zk, xu, xv, xk)
+                            n2u, n2v, n2k = _edge_normal(xu, xv, xk, yu, yv, yk)
                             # distance from the triangle's own plane: its normal
                             # from edges is well conditioned, unlike the sum of
                             # the edge-plane normals for small, far triangles
