@@ -71,5 +71,6 @@ def compare(path, names, n_frames, res, threads):
         diffs.append({"a": names[0], "b": name, "hit_mismatch_pixels": int(np.sum(hit_a != hit_b)),
                       "max_rel_depth_diff": float(rel.max()),
                       "pixels_depth_diff_over_1e-5": int(np.sum(rel > 1e-5)),
-                      "max_rgba_diff": float(np.abs(ref.rgba - img.rgba).max())})
+                      "max_rgba_diff": float(np.abs(ref.rgba - img.rgba).max()),
+                      "pixels_rgba_diff_over_1e-2": int(np.sum(np.abs(ref.rgba - img.rgba).max(axis=-1) > 1e-2))})
     return {"scene": str(path), "rows": rows, "diff": diffs}

@@ -82,6 +82,6 @@ def compare_table(result):
         console.print(f"{d['b']} vs {d['a']}: {d['hit_mismatch_pixels']} pixels hit/miss differ, "
                       f"depth max rel diff {d['max_rel_depth_diff']:.2e} "
                       f"({d['pixels_depth_diff_over_1e-5']} pixels over 1e-5), "
-                      f"max RGBA diff {d['max_rgba_diff']:.3g}")
+                      f"max RGBA diff {d['max_rgba_diff']:.3g} ({d['pixels_rgba_diff_over_1e-2']} pixels over 0.01)")
     console.print("published tests: Wald et al. 2006 (Coherent Grid Traversal), per frame, for reference; "
                   "their scenes and resolution differ")

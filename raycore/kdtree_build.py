@@ -180,9 +180,73 @@ def triangle_boxes(tri_verts, boxes):
             boxes[t, 3 + a] = max(x0, x1, x2) if ok else np.float32(-np.inf)
 
 
+PARALLEL_MIN = 20000       # below this many triangles one thread builds it all
+
+
+def _leaf_boxes(axis, split, child, lo, hi):
+    """{leaf node: (depth, box lo, box hi)} of a (small) tree."""
+    out, stack = {}, [(0, 0, lo.copy(), hi.copy())]
+    while stack:
+        node, depth, blo, bhi = stack.pop()
+        if axis[node] == LEAF:
+            out[node] = (depth, blo, bhi)
+            continue
+        a, sp = axis[node], split[node]
+        below_hi, above_lo = bhi.copy(), blo.copy()
+        below_hi[a], above_lo[a] = sp, sp
+        stack += [(child[node], depth + 1, blo, below_hi), (child[node] + 1, depth + 1, above_lo, bhi)]
+    return out
+
+
+def _build_parallel(boxes, lo, hi, max_depth, params, threads):
+    """The top levels on one thread, then each subtree the depth limit cut
+    off on its own thread (numba releases the GIL), stitched into one tree.
+    Same splits as a sequential build: SAH decisions do not depend on the
+    depth limit, and each subtree sees exactly its node's triangles and box."""
+    from concurrent.futures import ThreadPoolExecutor
+    top_depth = max(1, int(np.ceil(np.log2(threads * 4))))
+    axis, split, child, count, refs, _ = _build(boxes, lo, hi, top_depth, *params)
+    leaves = _leaf_boxes(axis, split, child, lo, hi)
+    jobs = [(node, d, blo, bhi) for node, (d, blo, bhi) in sorted(leaves.items())
+            if d == top_depth and count[node] > params[3]]
+
+    def run(job):
+        node, d, blo, bhi = job
+        ids = refs[child[node]:child[node] + count[node]].copy()
+        return ids, _build(boxes[ids], blo.astype(np.float32), bhi.astype(np.float32), max_depth - d, *params)
+
+    with ThreadPoolExecutor(threads) as pool:
+        results = list(pool.map(run, jobs))
+    axis_l, split_l, child_l, count_l = [axis.copy()], [split.copy()], [child.copy()], [count.copy()]
+    refs_l = [refs]
+    n_nodes, n_refs, deepest = len(axis), len(refs), top_depth
+    top = (axis_l[0], split_l[0], child_l[0], count_l[0])
+    for (node, d, _, _), (ids, (s_axis, s_split, s_child, s_count, s_refs, s_depth)) in zip(jobs, results):
+        base = n_nodes - 1                      # subtree node i >= 1 goes to base + i
+        s_child = s_child.copy()
+        inner = s_axis != LEAF
+        s_child[inner] += base
+        s_child[~inner] += n_refs
+        # the subtree's root takes the place of the cut-off leaf
+        top[0][node], top[1][node], top[2][node], top[3][node] = s_axis[0], s_split[0], s_child[0], s_count[0]
+        axis_l.append(s_axis[1:])
+        split_l.append(s_split[1:])
+        child_l.append(s_child[1:])
+        count_l.append(s_count[1:])
+        refs_l.append(ids[s_refs].astype(np.int32))
+        n_nodes += len(s_axis) - 1
+        n_refs += len(s_refs)
+        deepest = max(deepest, d + s_depth)
+    return (np.concatenate(axis_l), np.concatenate(split_l), np.concatenate(child_l),
+            np.concatenate(count_l), np.concatenate(refs_l), deepest)
+
+
 def build_kdtree(tri_verts: np.ndarray, max_depth: int = 0, c_traverse=C_TRAVERSE,
-                 c_intersect=C_INTERSECT, empty_bonus=EMPTY_BONUS, leaf_size=LEAF_SIZE) -> KdTree:
-    """SAH kd-tree over tri_verts (n, 9) f32; max_depth 0 = 8 + 1.3 log2(n)."""
+                 c_intersect=C_INTERSECT, empty_bonus=EMPTY_BONUS, leaf_size=LEAF_SIZE,
+                 threads: int = 0) -> KdTree:
+    """SAH kd-tree over tri_verts (n, 9) f32; max_depth 0 = 8 + 1.3 log2(n);
+    threads 0 = numba's thread count (subtrees are built in parallel)."""
+    import numba
     n = tri_verts.shape[0]
     boxes = np.empty((n, 6), np.float32)
     triangle_boxes(tri_verts, boxes)
@@ -196,9 +260,12 @@ def build_kdtree(tri_verts: np.ndarray, max_depth: int = 0, c_traverse=C_TRAVERS
     lo, hi = (lo - pad).astype(np.float32), (hi + pad).astype(np.float32)
     if max_depth <= 0:
         max_depth = int(8 + 1.3 * np.log2(max(n, 1)))
-    axis, split, child, count, refs, depth = _build(boxes, lo, hi, max_depth, np.float32(c_traverse),
-                                                    np.float32(c_intersect), np.float32(empty_bonus),
-                                                    int(leaf_size))
+    params = (np.float32(c_traverse), np.float32(c_intersect), np.float32(empty_bonus), int(leaf_size))
+    threads = threads or numba.get_num_threads()
+    if threads > 1 and n >= PARALLEL_MIN and max_depth > 4:
+        axis, split, child, count, refs, depth = _build_parallel(boxes, lo, hi, max_depth, params, threads)
+    else:
+        axis, split, child, count, refs, depth = _build(boxes, lo, hi, max_depth, *params)
     # a non-finite triangle would sit in every leaf: drop it from the lists
     if not finite.all():
         keep = finite[refs]

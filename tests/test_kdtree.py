@@ -187,3 +187,21 @@ def test_compare_command_reports_every_structure(tmp_path):
         assert d["hit_mismatch_pixels"] == 0 and d["max_rel_depth_diff"] < 1e-5, d
     assert CliRunner().invoke(main, ["compare", "grid", "vs", "octree", "--scene", "toys"]).exit_code == 2
     assert CliRunner().invoke(main, ["compare", "grid", "--scene", "toys"]).exit_code == 2
+
+
+def test_parallel_build_gives_the_same_tree_as_one_thread(rng):
+    tv = soup(rng, 25000, spread=6.0, size=0.1)
+    one = build_kdtree(tv, threads=1)
+    two = build_kdtree(tv, threads=2)
+    leaf1, leaf2 = one.axis == LEAF, two.axis == LEAF
+    assert len(one.axis) == len(two.axis) and one.depth == two.depth
+    assert one.count[leaf1].sum() == two.count[leaf2].sum()
+    assert sorted(np.round(one.split[~leaf1], 6)) == sorted(np.round(two.split[~leaf2], 6))
+    o = rng.uniform(-4, 4, size=(2000, 3)).astype(np.float32)
+    d = rng.normal(size=(2000, 3)).astype(np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t1, p1, _, _, _ = kd_trace_rays(one, tv, o, d)
+    t2, p2, _, _, _ = kd_trace_rays(two, tv, o, d)
+    assert np.array_equal(p1, p2) and np.array_equal(t1, t2)
+    bt, bp = _brute(tv, o, d)
+    _agree(t2, p2, bt, bp)
