@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from conftest import icosphere_mesh, soup, tri_verts_of
+from conftest import soup, tri_verts_of
 from oracles import brute_force_closest, camera_rays, kernel_camera_rays
 from raycore.camera import camera_basis
 from raycore.grid_build import build_grid
