@@ -172,6 +172,13 @@ def wrap_time(t, t0, t1, extrapolate):
     return min(max(t, t0), t1)
 
 
+def locate(times, t, extrapolate):
+    """(t after clamp/loop, index k of the segment [times[k], times[k+1]] holding it)."""
+    t = wrap_time(t, times[0], times[-1], extrapolate)
+    k = int(np.searchsorted(times, t, side="right")) - 1
+    return t, min(max(k, 0), len(times) - 2)
+
+
 class Curve:
     """A keyed value (any shape) with one interpolation method."""
 
@@ -184,30 +191,28 @@ class Curve:
         self.coeffs = None if len(self.times) == 1 else segment_coeffs(self.times, self.values, method)
 
     def segment(self, t):
-        """(k, s): the segment index and the local time of t, after extrapolation."""
-        t = wrap_time(t, self.times[0], self.times[-1], self.extrapolate)
-        k = int(np.searchsorted(self.times, t, side="right")) - 1
-        k = min(max(k, 0), len(self.times) - 2)
+        """(k, s): the segment index and the local time of t after extrapolation,
+        or (None, None) when t is the last key (returned exactly, not by Horner)."""
+        t, k = locate(self.times, t, self.extrapolate)
+        if t >= self.times[-1]:
+            return None, None
         return k, t - self.times[k]
 
     def __call__(self, t):
         if self.coeffs is None:
             return self.values[0]
         k, s = self.segment(t)
-        if k == len(self.times) - 2 and s >= self.times[-1] - self.times[-2]:
-            return self.values[-1]                     # the last key, exactly
+        if k is None:
+            return self.values[-1]
         c = self.coeffs[k]
         return ((c[3] * s + c[2]) * s + c[1]) * s + c[0]
 
     def eval_into(self, t, out):
         """Write the value at t into `out` (float32, the values' shape) with a
         parallel numba kernel: the per-frame path for vertex keyframes."""
-        if self.coeffs is None:
-            out[...] = self.values[0]
-            return
-        k, s = self.segment(t)
-        if k == len(self.times) - 2 and s >= self.times[-1] - self.times[-2]:
-            out[...] = self.values[-1]
+        k, s = (None, None) if self.coeffs is None else self.segment(t)
+        if k is None:
+            out[...] = self.values[0] if self.coeffs is None else self.values[-1]
             return
         c = self.coeffs[k].reshape(4, -1)
         horner_into(c[0], c[1], c[2], c[3], s, out.reshape(-1))
@@ -254,9 +259,7 @@ class RotationCurve:
         """scipy Rotation at time t."""
         if not self._piece_of_segment:
             return self.rotations[0]
-        t = wrap_time(t, self.times[0], self.times[-1], self.extrapolate)
-        k = int(np.searchsorted(self.times, t, side="right")) - 1
-        k = min(max(k, 0), len(self.times) - 2)
+        t, k = locate(self.times, t, self.extrapolate)
         return self._piece_of_segment[k]([t])[0]
 
     def __call__(self, t):

@@ -182,7 +182,7 @@ class AnimatedScene:
                 obj.place(0.0, self.vertices[obj.offset:obj.offset + len(obj.base)])
         self.moving = [o for o in self.objects if not o.static]
         # rigid movers are placed together (anim/rigid_batch.py), the rest one by one
-        rigid = [o for o in self.moving if o.curve is None and o.skeleton is None and o.gltf is None]
+        rigid = [o for o in self.moving if o.rigid and o.gltf is None]
         self.rigid_batch = RigidBatch(rigid) if rigid else None
         self.one_by_one = [o for o in self.moving if o not in rigid]
         self._camera_curve = None

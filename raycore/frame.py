@@ -100,7 +100,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     t0 = time.perf_counter()
     if kd:
         tri_verts = scene_grid.gather(geom.vertices)
-        tree = build_kdtree(tri_verts)
+        tree = scene_grid.kd_tree
+        if tree is None:
+            tree = build_kdtree(tri_verts)
+            if scene_grid.all_static:           # a fly-through: build the tree once
+                scene_grid.kd_tree = tree
         counters["kd_nodes"] = int(len(tree.axis))
     else:
         grid, tri_verts = scene_grid.update(geom.vertices)

@@ -51,7 +51,13 @@ class SceneGrid:
             self.packed = np.empty((len(self.moving), 9), np.float32)
         self.first = True
         self.normals_done = False
+        self.kd_tree = None         # kept by frame.render_frame when nothing moves
         self.static_shape = self.static_cells = self.static_bounds = None
+
+    @property
+    def all_static(self):
+        """True when no triangle of the scene ever moves (the camera may)."""
+        return self.incremental and len(self.moving) == 0
 
     def normals_now(self):
         """Vertex normals of the triangles of the last update (moving ones

@@ -86,3 +86,21 @@ def test_frame_renders_the_same_alone_or_in_sequence(tmp_path):
         _, last = seq.render(t)
     _, alone = SceneRenderer(scene, cfg, shading_of(scene)).render(1.5)
     assert np.array_equal(last.rgba, alone.rgba) and np.array_equal(last.z, alone.z)
+
+
+def test_static_scene_builds_its_kd_tree_once(tmp_path):
+    from anim.scene import AnimatedScene
+    from cli.pipeline import SceneRenderer, config_of, shading_of
+    from test_scene import scene_with
+    path = scene_with(tmp_path, """  - name: floor
+    mesh: floor.obj
+  - name: ball
+    mesh: ball.obj
+""", camera_yaml="camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0.5, 0]}, {t: 2, eye: [3, 2, 5], look_at: [0, 0.5, 0]}]}")
+    scene = AnimatedScene(path)
+    renderer = SceneRenderer(scene, config_of(scene, width=32, height=32, accel="kdtree"), shading_of(scene))
+    _, first = renderer.render(0.0)
+    tree = renderer.scene_grid.kd_tree
+    _, second = renderer.render(1.0)
+    assert tree is not None and renderer.scene_grid.kd_tree is tree
+    assert second.timings["build_ms"] < first.timings["build_ms"]
