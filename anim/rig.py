@@ -4,13 +4,68 @@ blend skinning (anim/vertex_kernels.skin_into).
 A joint's pose is G_j = G_parent [R_j(t) | o_j - o_parent + T_j(t)]: it turns
 about its bind-pose origin o_j, then carries its children. A vertex moves by
 sum_k w_k G_j (v - o_j); the per-joint matrices are composed in float64.
+All joints' tracks are evaluated and composed by numba kernels in one pass
+(anim/track_kernels.py); only rotation splines go through scipy.
 """
 from pathlib import Path
 
 import numpy as np
 
+from raycore._jit import kernel
+
 from .errors import SceneError
+from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks
 from .tracks import AngleCurve, rotation_curve, vector_curve
+
+NO_ROTATION, EULER, QUATERNION, MATRIX = 0, 1, 2, 3
+
+
+@kernel
+def _rotate_about(m, axis, rad):
+    """m = m @ R_axis(rad) for a 3x3 float64 matrix, in place."""
+    c, s = np.cos(rad), np.sin(rad)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    for r in range(3):
+        a, b = m[r, i], m[r, j]
+        m[r, i] = a * c + b * s
+        m[r, j] = b * c - a * s
+
+
+@kernel
+def _pose(kind, euler, axes, intrinsic, quat, matrix, trans, origin, parent, out):
+    """(J, 3, 4) skinning matrices G_j (v - o_j) from evaluated joint tracks."""
+    r = np.empty((3, 3))
+    g = np.empty((out.shape[0], 3, 4))
+    for j in range(out.shape[0]):
+        for a in range(3):
+            for b in range(3):
+                r[a, b] = 1.0 if a == b else 0.0
+        if kind[j] == EULER:               # scipy's convention: extrinsic = R2 R1 R0
+            for step in range(3):
+                k = step if intrinsic[j] else 2 - step
+                _rotate_about(r, axes[j, k], np.radians(euler[j, k]))
+        elif kind[j] == QUATERNION:
+            w, x, y, z = quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3]
+            r[0, 0], r[0, 1], r[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+            r[1, 0], r[1, 1], r[1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+            r[2, 0], r[2, 1], r[2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+        elif kind[j] == MATRIX:
+            r[:, :] = matrix[j]
+        p = parent[j]
+        off = np.empty(3)
+        for a in range(3):
+            off[a] = origin[j, a] - (origin[p, a] if p >= 0 else 0.0) + trans[j, a]
+        for a in range(3):
+            for b in range(3):
+                g[j, a, b] = r[a, b] if p < 0 else (g[p, a, 0] * r[0, b] + g[p, a, 1] * r[1, b]
+                                                    + g[p, a, 2] * r[2, b])
+            g[j, a, 3] = off[a] if p < 0 else (g[p, a, 0] * off[0] + g[p, a, 1] * off[1]
+                                               + g[p, a, 2] * off[2] + g[p, a, 3])
+        for a in range(3):
+            for b in range(3):
+                out[j, a, b] = g[j, a, b]
+            out[j, a, 3] = g[j, a, 3] - (g[j, a, 0] * origin[j, 0] + g[j, a, 1] * origin[j, 1]
+                                         + g[j, a, 2] * origin[j, 2])
 
 
 def load_weights(path, n_vertices, n_joints, scene_path, key, warnings):
@@ -74,22 +129,38 @@ class Skeleton:
         self.joint, self.weight = load_weights(weights_path, n_vertices, len(names), scene_path,
                                                f"{key}.weights", warnings)
         self.constant = all(c is None or c.constant for c in self.rotation + self.translation)
+        self._pack()
+
+    def _pack(self):
+        """Flat arrays of all joints' tracks for the numba kernels."""
+        n = len(self.parent)
+        self.kind = np.full(n, NO_ROTATION, np.int64)
+        self.axes = np.zeros((n, 3), np.int64)
+        self.intrinsic = np.zeros(n, np.bool_)
+        angle_curves, quat_curves = [None] * n, [None] * n
+        for j, rot in enumerate(self.rotation):
+            if isinstance(rot, AngleCurve):
+                self.kind[j] = EULER
+                angle_curves[j] = rot.curve
+                self.axes[j] = ["xyz".index(c) for c in rot.order.lower()]
+                self.intrinsic[j] = rot.order.isupper()
+            elif rot is not None:
+                self.kind[j] = MATRIX if rot.method == "spline" else QUATERNION
+                quat_curves[j] = rot
+        self.packed_angles = pack_vector_tracks(angle_curves, (0.0, 0.0, 0.0))
+        *self.packed_quats, self.scipy_joints = pack_rotation_tracks(quat_curves)
+        self.packed_trans = pack_vector_tracks(self.translation, (0.0, 0.0, 0.0))
 
     def matrices(self, t):
         """(J, 3, 4) float64 skinning matrices at time t."""
         n = len(self.parent)
-        pose = np.zeros((n, 3, 4))
-        for j in range(n):
-            r = self.rotation[j](t) if self.rotation[j] is not None else np.eye(3)
-            p = self.parent[j]
-            offset = self.origin[j] - (self.origin[p] if p >= 0 else 0.0)
-            if self.translation[j] is not None:
-                offset = offset + self.translation[j](t)
-            if p < 0:
-                pose[j, :, :3], pose[j, :, 3] = r, offset
-            else:
-                pose[j, :, :3] = pose[p, :, :3] @ r
-                pose[j, :, 3] = pose[p, :, :3] @ offset + pose[p, :, 3]
-        skin = pose.copy()
-        skin[:, :, 3] -= np.einsum("jab,jb->ja", pose[:, :, :3], self.origin)   # G_j (v - o_j)
-        return skin
+        euler, quat, trans = np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 3))
+        eval_vectors(t, *self.packed_angles, euler)
+        eval_slerp(t, *self.packed_quats, quat)
+        eval_vectors(t, *self.packed_trans, trans)
+        matrix = np.zeros((n, 3, 3))
+        for j in self.scipy_joints:
+            matrix[j] = self.rotation[j](t)
+        out = np.empty((n, 3, 4))
+        _pose(self.kind, euler, self.axes, self.intrinsic, quat, matrix, trans, self.origin, self.parent, out)
+        return out

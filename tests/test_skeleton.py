@@ -146,3 +146,33 @@ def test_lbs_kernel_against_a_python_loop(rng):
             m = mats[joint[v, c]]
             want[v] += weight[v, c] * (m[:, :3] @ rest[v].astype(np.float64) + m[:, 3])
     np.testing.assert_allclose(out, want, rtol=1e-6, atol=1e-3)
+
+
+@pytest.mark.parametrize("order", ["xyz", "zyx", "XYZ", "ZXZ", "yxy"])
+def test_joint_angles_follow_scipys_euler_convention(tmp_path, order, rng):
+    keys = [[0.0, *rng.uniform(-90, 90, 3)], [1.0, *rng.uniform(-90, 90, 3)]]
+    joints = f"""        - name: shoulder
+          angles: {{order: {order}, keys: {[[float(x) for x in k] for k in keys]}}}
+        - name: elbow
+          parent: shoulder
+          origin: [1, 0, 0]
+          rotation: {{interpolation: spline, keys: [[0, 1, 0, 0, 0], [0.5, 0.9, 0.1, 0.3, 0.2], [1, 0.8, 0.0, 0.6, 0]]}}
+        - name: hand
+          parent: elbow
+          origin: [1.5, 0, 0]
+          translation: {{keys: [[0, 0, 0, 0], [1, 0.1, 0.2, 0.3]]}}
+"""
+    path, _, _ = _arm(tmp_path, joints_yaml=joints)
+    skel = AnimatedScene(path).objects[0].skeleton
+    for t in (0.0, 0.3, 0.77, 1.0):
+        # reference: scipy rotations composed down the chain in Python
+        ang = np.array(keys[0][1:]) + t * (np.array(keys[1][1:]) - np.array(keys[0][1:]))
+        rots = [Rotation.from_euler(order, ang, degrees=True).as_matrix(), skel.rotation[1](t), np.eye(3)]
+        origins = np.array([[0, 0, 0], [1, 0, 0], [1.5, 0, 0]], float)
+        offsets = [origins[0], origins[1] - origins[0], origins[2] - origins[1] + np.array([0.1, 0.2, 0.3]) * t]
+        g_r, g_t, want = np.eye(3), np.zeros(3), []
+        for j in range(3):
+            g_t = g_r @ offsets[j] + g_t
+            g_r = g_r @ rots[j]
+            want.append(np.concatenate([g_r, (g_t - g_r @ origins[j])[:, None]], axis=1))
+        np.testing.assert_allclose(skel.matrices(t), np.stack(want), atol=1e-12)
