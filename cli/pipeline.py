@@ -168,9 +168,10 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
                    "interp_ms": interp_ms, **tm, "write_ms": 0.0,
                    "tri_tests": float(result.counters["tri_tests"]),
                    "shadow_rays": result.counters["shadow_rays"],
-                   "cells_visited": result.counters["cells"],
+                   "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
                    "fallback_rays": result.counters["fallback_rays"],
-                   "grid_dims": result.counters["grid_dims"],
+                   **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
+                      else {"kd_nodes": result.counters["kd_nodes"]}),
                    "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
             rows.append(row)
             pending.append(writer.submit(write, path, result, row))

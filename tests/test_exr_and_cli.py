@@ -126,3 +126,13 @@ def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
     assert "order measured" in res.output and "bounce" in res.output
     pchip = [r for r in report["bounce"] if r["method"] == "pchip"]
     assert pchip and all(r["min_height"] >= 0 for r in pchip)
+
+
+def test_render_with_the_kdtree(small_demo, tmp_path):
+    out = tmp_path / "kd"
+    res = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(out), "--frames", "2:2",
+                                    "--accel", "kdtree", "--quiet"])
+    assert res.exit_code == 0, res.output
+    stats = json.loads((out / "stats.json").read_text())
+    assert stats["accel"] == "kdtree" and stats["frames"][0]["kd_nodes"] > 0
+    assert len(list(out.glob("*.exr"))) == 1
