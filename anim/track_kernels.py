@@ -30,7 +30,8 @@ def pack_vector_tracks(curves, default):
 
 @kernel
 def _segment(times, a, b, t, loop):
-    """(k, s, past_end) for time t in keys times[a:b] after clamp/loop."""
+    """(k, s, past_end) for time t in keys times[a:b] after clamp/loop;
+    past_end (the value is the last key's) also for a single key."""
     t0, t1 = times[a], times[b - 1]
     if t1 <= t0:
         return 0, 0.0, True
@@ -52,11 +53,7 @@ def _segment(times, a, b, t, loop):
 @kernel
 def eval_vectors(t, times, coeffs, last, key_start, seg_start, loop, out):
     for o in range(out.shape[0]):
-        a, b = key_start[o], key_start[o + 1]
-        if b - a == 1:
-            out[o] = last[o]
-            continue
-        k, s, past_end = _segment(times, a, b, t, loop[o])
+        k, s, past_end = _segment(times, key_start[o], key_start[o + 1], t, loop[o])
         if past_end:
             out[o] = last[o]
             continue
@@ -70,9 +67,6 @@ def eval_slerp(t, times, quats, key_start, loop, out):
     """Shortest-arc slerp of unit quaternion keys (w, x, y, z) per object."""
     for o in range(out.shape[0]):
         a, b = key_start[o], key_start[o + 1]
-        if b - a == 1:
-            out[o] = quats[a]
-            continue
         k, s, past_end = _segment(times, a, b, t, loop[o])
         if past_end:
             out[o] = quats[b - 1]
