@@ -343,6 +343,9 @@ def unswizzle(sw_t, sw_prim, sw_b1, sw_b2, row_off, col_off, out_t, out_prim, ou
 # a shadow ray to a point light stops this fraction of its length short of
 # the light, so a light placed on a surface does not shadow itself
 SHADOW_T_MAX_FRACTION = np.float32(1.0 - 1e-6)
+# a shadow packet whose longest ray is this much longer than its shortest is
+# traced as two (short and long rays apart); see trace_shadows
+SPLIT_RATIO = np.float32(1.25)
 
 
 @helper
@@ -472,6 +475,7 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     for _w in prange(n_workers):
         rays, work, hit_t, occ_b1, occ_b2, occ_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             _scratch(packet, sub_size)
+        saved_tmax = np.empty((n_sub, ss), np.float32)
         off_x, off_y = _ray_offsets(sub_size)
         while True:
             tile = fetch_add(next_tile, 0, 1)
@@ -487,16 +491,36 @@ def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                                         cam, width, height, jx, jy, light_kind, lx, ly, lz,
                                         offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
                                         row_off, col_off, faces, normals)
-                    _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
-                                       sub, sub_active, sub_done, sub_skip, mailbox,
-                                       g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                                       tri_verts, eps, counters, tile, cull)
+                    # point-light rays run from the light to the surface: where
+                    # their lengths jump (a silhouette against the ground behind),
+                    # trace the short and the long ones as two packets, so that
+                    # neither frustum sweeps through the other's geometry
+                    shortest = INF
+                    longest = F0
                     for j in range(n_sub):
-                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
                         for r in range(ss):
+                            saved_tmax[j, r] = rays[TMAX, j, r]
                             if rays[TMAX, j, r] > rays[TMIN, j, r]:
-                                p = (y0 + off_y[r]) * width + x0 + off_x[r]
-                                out_vis[p] = F1 if occ_prim[j, r] < 0 else F0
+                                shortest = min(shortest, rays[TMAX, j, r])
+                                longest = max(longest, rays[TMAX, j, r])
+                    split = light_kind == 0 and longest > SPLIT_RATIO * shortest
+                    cut = np.sqrt(shortest * longest)
+                    for part in range(2 if split else 1):
+                        if split:
+                            for j in range(n_sub):
+                                for r in range(ss):
+                                    mine = (saved_tmax[j, r] <= cut) == (part == 0)
+                                    rays[TMAX, j, r] = saved_tmax[j, r] if mine else -F1
+                        _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
+                                           sub, sub_active, sub_done, sub_skip, mailbox,
+                                           g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
+                                           tri_verts, eps, counters, tile, cull)
+                        for j in range(n_sub):
+                            x0, y0 = _sub_corner(px, py, j, packet, sub_size)
+                            for r in range(ss):
+                                if rays[TMAX, j, r] > rays[TMIN, j, r]:
+                                    p = (y0 + off_y[r]) * width + x0 + off_x[r]
+                                    out_vis[p] = F1 if occ_prim[j, r] < 0 else F0
 
 
 @parallel_kernel
