@@ -17,6 +17,7 @@ import pygltflib
 
 from .errors import SceneError
 from .interpolate import wrap_time
+from .track_kernels import quat_to_matrix
 from .vertex_kernels import skin_into, transform_into
 
 _DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -26,10 +27,9 @@ _NORMALIZE = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 655
 
 def _quat_matrix(q):
     """3x3 rotation of a unit quaternion (x, y, z, w), glTF order."""
-    x, y, z, w = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    out = np.empty((3, 3))
+    quat_to_matrix(q[3], q[0], q[1], q[2], out)
+    return out
 
 
 def slerp(q0, q1, s):

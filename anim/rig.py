@@ -14,7 +14,7 @@ import numpy as np
 from raycore._jit import kernel
 
 from .errors import SceneError
-from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks
+from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks, quat_to_matrix
 from .tracks import AngleCurve, rotation_curve, vector_curve
 
 NO_ROTATION, EULER, QUATERNION, MATRIX = 0, 1, 2, 3
@@ -45,10 +45,7 @@ def _pose(kind, euler, axes, intrinsic, quat, matrix, trans, origin, parent, out
                 k = step if intrinsic[j] else 2 - step
                 _rotate_about(r, axes[j, k], np.radians(euler[j, k]))
         elif kind[j] == QUATERNION:
-            w, x, y, z = quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3]
-            r[0, 0], r[0, 1], r[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
-            r[1, 0], r[1, 1], r[1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
-            r[2, 0], r[2, 1], r[2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+            quat_to_matrix(quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3], r)
         elif kind[j] == MATRIX:
             r[:, :] = matrix[j]
         p = parent[j]

@@ -12,25 +12,21 @@ from numba import prange
 
 from raycore._jit import kernel, parallel_arith_kernel
 
-from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks
+from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks, quat_to_matrix
 
 
 @kernel
 def _compose(quat, scale, trans, use_matrix, rot_matrix, out):
     """out[o] = [R(q) * S | T], or the given rotation matrix where use_matrix."""
+    r = np.empty((3, 3))
     for o in range(out.shape[0]):
         if use_matrix[o]:
-            for i in range(3):
-                for j in range(3):
-                    out[o, i, j] = rot_matrix[o, i, j] * scale[o, j]
+            r[:, :] = rot_matrix[o]
         else:
-            w, x, y, z = quat[o, 0], quat[o, 1], quat[o, 2], quat[o, 3]
-            r = ((1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
-                 (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
-                 (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)))
-            for i in range(3):
-                for j in range(3):
-                    out[o, i, j] = r[i][j] * scale[o, j]
+            quat_to_matrix(quat[o, 0], quat[o, 1], quat[o, 2], quat[o, 3], r)
+        for i in range(3):
+            for j in range(3):
+                out[o, i, j] = r[i, j] * scale[o, j]
         for i in range(3):
             out[o, i, 3] = trans[o, i]
 

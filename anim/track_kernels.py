@@ -93,6 +93,14 @@ def eval_slerp(t, times, quats, key_start, loop, out):
             out[o, i] /= n
 
 
+@kernel
+def quat_to_matrix(w, x, y, z, out):
+    """out (3, 3) = rotation of the unit quaternion (w, x, y, z)."""
+    out[0, 0], out[0, 1], out[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    out[1, 0], out[1, 1], out[1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    out[2, 0], out[2, 1], out[2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+
+
 def pack_rotation_tracks(curves):
     """Flat arrays of many RotationCurves (None = identity): (times, quats
     (w, x, y, z), key_start, loop, indices of the `spline` ones, which are

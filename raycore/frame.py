@@ -93,7 +93,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
         buffers = FrameBuffers(W, H, n_lights, cfg.packet)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
-    counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0}
+    counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0,
+                "primary_packets": 0, "primary_visits": 0, "primary_tests": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
     kd = cfg.accel == "kdtree"
@@ -145,9 +146,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["tri_tests"] += int(hits.counters[2])
         counters["fallback_rays"] += int(hits.counters[4])
         # primary rays alone (grid: cells; kd-tree: nodes), for `frustrace compare`
-        counters["primary_packets"] = counters.get("primary_packets", 0) + int(hits.counters[0])
-        counters["primary_visits"] = counters.get("primary_visits", 0) + int(hits.counters[1])
-        counters["primary_tests"] = counters.get("primary_tests", 0) + int(hits.counters[2])
+        counters["primary_packets"] += int(hits.counters[0])
+        counters["primary_visits"] += int(hits.counters[1])
+        counters["primary_tests"] += int(hits.counters[2])
 
         t0 = time.perf_counter()
         vis = buffers.vis if cast_shadows else buffers.vis[:0]

@@ -114,8 +114,7 @@ def trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_v
                 best_t, best_p, best_b1, best_b2 = t, tri, b1, b2
                 if any_hit:
                     return best_t, best_p, best_b1, best_b2
-        # nodes come off the stack in order along the ray: stop once the
-        # best hit lies before the next one
+        # skip stacked nodes that start beyond the best hit so far
         while True:
             if top == 0:
                 return best_t, best_p, best_b1, best_b2
@@ -123,8 +122,6 @@ def trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_v
             if best_t >= stack_t0[top]:
                 node, t0, t1 = stack_n[top], stack_t0[top], stack_t1[top]
                 break
-        if best_p >= 0 and best_t < t0:
-            return best_t, best_p, best_b1, best_b2
 
 
 @parallel_kernel
