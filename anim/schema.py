@@ -38,6 +38,9 @@ class Output(Strict):
     path: str = "out/frame_####.exr"
     resolution: Tuple[Annotated[int, Field(gt=0, le=16384)], Annotated[int, Field(gt=0, le=16384)]] = (512, 512)
     aovs: List[Literal["N", "P", "id"]] = []
+    # EXR codec (raycore/image_io.COMPRESSIONS); zip is lossless and measured fastest
+    compression: Literal["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa",
+                         "dwab", "zstd", "htj2k256", "htj2k32"] = "zip"
 
 
 class CameraKey(Strict):

@@ -37,6 +37,6 @@ def render_preview(anim_yaml: Path, png_path: Path, size: int = 320):
     with tempfile.TemporaryDirectory() as tmp:
         exr = str(Path(tmp) / "preview.exr")
         rgba = result.rgba
-        write_exr(exr, {"R": rgba[..., 0], "G": rgba[..., 1], "B": rgba[..., 2], "A": rgba[..., 3]}, {})
+        write_exr(exr, {"RGBA": rgba}, {})
         png_path.parent.mkdir(parents=True, exist_ok=True)
         exr_to_png(exr, str(png_path))

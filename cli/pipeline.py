@@ -143,13 +143,12 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
 
     def write(path, result, row):
         t0 = time.perf_counter()
-        channels = {"R": result.rgba[..., 0], "G": result.rgba[..., 1], "B": result.rgba[..., 2],
-                    "A": result.rgba[..., 3], "Z": result.z, **result.aovs}
+        channels = {"RGBA": result.rgba, "Z": result.z, **result.aovs}
         meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
                 "Software": f"frustrace {VERSION}"}
         for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
             meta[f"frustrace:{k}"] = float(row[k])
-        write_exr(str(path), channels, meta)
+        write_exr(str(path), channels, meta, scene.spec.output.compression)
         row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
 
     wall0 = time.perf_counter()

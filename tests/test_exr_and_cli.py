@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.main import main
-from raycore.image_io import read_exr, write_exr
+from raycore.image_io import COMPRESSIONS, read_exr, write_exr
 
 DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
 
@@ -136,3 +136,26 @@ def test_render_with_the_kdtree(small_demo, tmp_path):
     stats = json.loads((out / "stats.json").read_text())
     assert stats["accel"] == "kdtree" and stats["frames"][0]["kd_nodes"] > 0
     assert len(list(out.glob("*.exr"))) == 1
+
+
+@pytest.mark.parametrize("compression", sorted(c for c, (_, kind) in COMPRESSIONS.items() if kind == "lossless"))
+def test_lossless_compressions_round_trip_exactly(tmp_path, compression):
+    rng = np.random.default_rng(1)
+    rgba = rng.random((37, 41, 4)).astype(np.float32) * 4
+    z = rng.random((37, 41)).astype(np.float32) * 1e3
+    z[::5, ::3] = np.inf
+    path = tmp_path / "f.exr"
+    write_exr(str(path), {"RGBA": rgba, "Z": z}, {"frustrace:frame": 1}, compression)
+    names, px, spec = read_exr(str(path))
+    assert names == ["R", "G", "B", "A", "Z"]
+    assert spec.getattribute("compression") == compression
+    assert np.array_equal(px[..., :4], rgba.astype(np.float16).astype(np.float32))
+    assert np.array_equal(px[..., 4], z)
+    assert [p.name for p in tmp_path.iterdir()] == ["f.exr"]
+
+
+def test_unknown_compression_is_a_scene_error(small_demo):
+    small_demo.write_text(small_demo.read_text().replace("aovs: [N, id]", "aovs: [N, id], compression: lzma"))
+    result = CliRunner().invoke(main, ["check", str(small_demo)])
+    assert result.exit_code == 2
+    assert "output.compression" in result.output
