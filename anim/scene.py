@@ -21,7 +21,8 @@ from .schema import SceneFile
 from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from .vertex_kernels import skin_into, transform_into
 
-DEFAULT_MATERIAL = {"diffuse": (0.8, 0.8, 0.8), "specular": 0.0, "shininess": 32.0, "texture": None}
+DEFAULT_MATERIAL = {"diffuse": (0.8, 0.8, 0.8), "specular": 0.0, "shininess": 32.0, "texture": None,
+                    "texture_space": "auto"}
 
 
 def _key_path(loc):
@@ -139,6 +140,7 @@ class AnimatedScene:
         self.material_names = list(spec.materials)
         self.materials = [m.model_dump() for m in spec.materials.values()] + [DEFAULT_MATERIAL]
         self.texture_paths = []
+        self.texture_spaces = []       # "auto" | "srgb" | "linear", one per texture
         for m in self.materials:
             if m["texture"]:
                 tex_path = self.path.parent / m["texture"]
@@ -147,6 +149,7 @@ class AnimatedScene:
                     raise SceneError(self.path, f"materials.{name}.texture", f"file not found: {tex_path}")
                 m["texture_index"] = len(self.texture_paths)
                 self.texture_paths.append(tex_path)
+                self.texture_spaces.append(m["texture_space"])
             else:
                 m["texture_index"] = -1
         self.warnings = []         # e.g. quaternions normalised; the CLI prints them

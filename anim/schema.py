@@ -99,6 +99,10 @@ class Material(Strict):
     specular: Annotated[float, Field(ge=0)] = 0.0
     shininess: Annotated[float, Field(ge=0)] = 32.0
     texture: Optional[str] = None
+    # how the texture's values are encoded: auto = sRGB for integer formats
+    # (8/16-bit PNG, JPEG: colour by convention), linear for float ones (EXR, HDR);
+    # linear for data textures stored in 8 bits
+    texture_space: Literal["auto", "srgb", "linear"] = "auto"
 
 
 class Track(Strict):

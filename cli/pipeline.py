@@ -54,9 +54,9 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
 def shading_of(scene: AnimatedScene) -> Shading:
     """Materials, lights and textures as flat arrays; textures loaded once."""
     texels, info, offset = [], [], 0
-    for path in scene.texture_paths:
+    for path, space in zip(scene.texture_paths, scene.texture_spaces):
         try:
-            img = read_texture(path)
+            img = read_texture(path, space)
         except OSError as exc:
             raise SceneError(scene.path, "materials", f"cannot read texture: {exc}") from None
         h, w = img.shape[:2]

@@ -87,12 +87,28 @@ def read_exr(path: str):
         inp.close()
 
 
-def read_texture(path: str) -> np.ndarray:
-    """(H, W, 3) float32 linear RGB of an image file (grey is replicated, alpha dropped)."""
-    inp = oiio.ImageInput.open(str(path))
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) undone, for values in [0, 1]."""
+    v = np.asarray(values, np.float32)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def read_texture(path: str, space: str = "auto") -> np.ndarray:
+    """(H, W, 3) float32 linear RGB of an image file (grey is replicated).
+
+    space "auto" decodes sRGB for integer formats (8- and 16-bit PNG, JPEG:
+    colour images are sRGB-encoded by convention) and keeps float formats
+    (EXR, HDR) as they are; "srgb" / "linear" force one or the other (data
+    textures such as masks are linear). Alpha is dropped and never scales the
+    colour: the surface is opaque, so the file's colour is read unassociated.
+    """
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise OSError(f"{path}: {oiio.geterror()}")
     try:
+        is_float = inp.spec().format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
         pixels = inp.read_image("float")
     finally:
         inp.close()
@@ -100,9 +116,13 @@ def read_texture(path: str) -> np.ndarray:
         raise OSError(f"{path}: cannot read pixels")
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    if pixels.shape[2] < 3:
+    channels = pixels.shape[2]
+    if channels < 3:                   # grey, or grey + alpha
         pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
-    return np.ascontiguousarray(pixels[:, :, :3], np.float32)
+    rgb = np.ascontiguousarray(pixels[:, :, :3], np.float32)
+    if space == "srgb" or (space == "auto" and not is_float):
+        rgb = srgb_to_linear(rgb)
+    return rgb
 
 
 def _write_8bit(path: str, rgb: np.ndarray):
@@ -117,14 +137,20 @@ def _write_8bit(path: str, rgb: np.ndarray):
         out.close()
 
 
+def linear_to_srgb(values: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function (IEC 61966-2-1) for linear values, clipped to [0, 1]."""
+    v = np.clip(np.asarray(values, np.float32), 0.0, 1.0)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
 def write_texture(path: str, pixels: np.ndarray):
-    """An 8-bit image file (PNG by extension) from (H, W, 3) values in [0, 1]."""
-    _write_8bit(path, (np.clip(pixels, 0, 1) * 255 + 0.5).astype(np.uint8))
+    """An 8-bit sRGB-encoded image file (PNG by extension) from (H, W, 3)
+    linear values in [0, 1], as read_texture decodes it."""
+    _write_8bit(path, (linear_to_srgb(pixels) * 255 + 0.5).astype(np.uint8))
 
 
 def exr_to_png(exr_path: str, png_path: str):
     """Tone-map a frame for previews: RGB over its background, clipped, sRGB encoded."""
     names, pixels, _ = read_exr(exr_path)
-    rgb = np.clip(pixels[:, :, [names.index(c) for c in "RGB"]], 0.0, 1.0)
-    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1 / 2.4) - 0.055)
+    srgb = linear_to_srgb(pixels[:, :, [names.index(c) for c in "RGB"]])
     _write_8bit(png_path, (srgb * 255 + 0.5).astype(np.uint8))

@@ -159,3 +159,39 @@ def test_unknown_compression_is_a_scene_error(small_demo):
     result = CliRunner().invoke(main, ["check", str(small_demo)])
     assert result.exit_code == 2
     assert "output.compression" in result.output
+
+
+def _write_png(path, rgba_u8):
+    import OpenImageIO as oiio
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(rgba_u8.shape[1], rgba_u8.shape[0], rgba_u8.shape[2], "uint8")
+    spec.attribute("oiio:UnassociatedAlpha", 1)       # the bytes as given, as a paint program saves them
+    assert out.open(str(path), spec) and out.write_image(rgba_u8)
+    out.close()
+
+
+def test_8bit_textures_are_decoded_from_srgb_and_alpha_does_not_scale_colour(tmp_path):
+    from raycore.image_io import read_texture
+    px = np.zeros((2, 2, 4), np.uint8)
+    px[..., :3] = 128
+    px[..., 3] = [[255, 0], [64, 128]]
+    _write_png(tmp_path / "t.png", px)
+    rgb = read_texture(tmp_path / "t.png")
+    # sRGB 128/255 is 0.2158 linear, whatever the alpha
+    np.testing.assert_allclose(rgb, 0.21586, atol=2e-4)
+    np.testing.assert_allclose(read_texture(tmp_path / "t.png", "linear"), 128 / 255, atol=1e-6)
+
+
+def test_float_textures_stay_linear(tmp_path):
+    from raycore.image_io import read_texture
+    vals = np.full((3, 3, 4), 0.5, np.float32)
+    write_exr(str(tmp_path / "t.exr"), {"RGBA": vals}, {})
+    np.testing.assert_allclose(read_texture(tmp_path / "t.exr"), 0.5)
+    np.testing.assert_allclose(read_texture(tmp_path / "t.exr", "srgb"), 0.21404, atol=1e-4)
+
+
+def test_texture_write_read_round_trip(tmp_path):
+    from raycore.image_io import read_texture, write_texture
+    lin = np.random.default_rng(3).random((5, 7, 3)).astype(np.float32)
+    write_texture(str(tmp_path / "t.png"), lin)
+    np.testing.assert_allclose(read_texture(tmp_path / "t.png"), lin, atol=0.01)
