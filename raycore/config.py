@@ -11,10 +11,13 @@ EPS_GRID_REL = 1e-5
 # culling may keep a triangle it could drop, never drop one it must keep.
 EPS_CULL_REL = 1e-5
 # Shadow ray origins are pushed off the surface along the geometric normal by
-# EPS_SHADOW_REL * (|hit point| + scene size): float32 hit points carry a
-# relative error of a few ulps (2^-24 ~ 6e-8), so 1e-5 clears acne with a
-# wide margin while staying far below any gap between real surfaces.
-EPS_SHADOW_REL = 1e-5
+# EPS_OFFSET_ULPS float32 ulps (2^-24) of (largest |coordinate| of the hit
+# triangle and lifted point + |light position| + ray length): the error of
+# the hit point grows with the vertices' magnitude (pbrt-v4 bounds it by
+# gamma(7) ~ 7 ulps of sum |b_i v_i|), and the error of the distance at which
+# a ray from the light meets the receiving plane with the magnitudes of light,
+# vertices and ray length (a few ulps each). 32 leaves a 4x margin over both.
+EPS_OFFSET_ULPS = 32.0
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""One frame, phase by phase: build -> trace -> shadow -> shade.
+"""One frame, phase by phase: build -> trace -> surface -> shadow -> shade.
 
 Inputs are flat arrays only (no scene-file objects), so `raycore` never needs
 `anim`. Each phase is timed apart; the shadow pass is skipped when there are
@@ -13,10 +13,13 @@ import numpy as np
 from .camera import camera_basis
 from .config import RenderConfig
 from .kdtree_build import build_kdtree
-from .kdtree_trace import kd_trace_camera, kd_trace_light
+from .kdtree_trace import kd_light_visibility, kd_trace_camera
 from .scene_grid import SceneGrid
-from .shade import shade_pixels
-from .trace import Hits, camera_buffers, row_major_offsets, trace_camera, trace_light
+from .shade import shade_samples, write_pixels
+from .shadow_packets import LightRays
+from .surface import visible_surface
+from .workspace import Workspace
+from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera
 
 # kd-tree camera packets: 8x8 rays per frustum (the grid's packet size is cfg.packet)
 KD_PACKET = 8
@@ -75,25 +78,32 @@ class FrameBuffers:
     large arrays cost page faults on every frame."""
 
     def __init__(self, width, height, n_lights, packet):
-        n = width * height
         self.size = (width, height, n_lights, packet)
         self.camera = camera_buffers(width, height, packet)
-        self.vis = np.empty((n_lights, n), np.float32)
-        self.rgba = np.empty((n, 4), np.float32)
-        self.z = np.empty(n, np.float32)
+        self.work = Workspace()
+
+
+def _light_is_dark(light) -> bool:
+    """A light of zero colour * intensity adds nothing: it costs no ray."""
+    return not np.any(light[4:7] > 0)
 
 
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
                  buffers: FrameBuffers = None, scene_grid: SceneGrid = None) -> FrameResult:
     """Render one frame. Pass the same `buffers` and `scene_grid` for
     consecutive frames to reuse work arrays and static geometry; the returned
-    images are always fresh arrays."""
+    images are always fresh arrays.
+
+    Per pass of camera rays (one per sample offset): trace, gather the visible
+    surface once (surface.py), trace each light's shadow rays in light-space
+    packets (shadow_packets.py), shade the samples, scatter them into the image."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
         buffers = FrameBuffers(W, H, n_lights, cfg.packet)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
-    counters = {"rays": 0, "shadow_rays": 0, "tri_tests": 0, "cells": 0, "fallback_rays": 0,
+    counters = {"rays": 0, "shadow_rays": 0, "shadow_rays_skipped": 0, "lights_skipped": 0,
+                "tri_tests": 0, "cells": 0, "fallback_rays": 0,
                 "primary_packets": 0, "primary_visits": 0, "primary_tests": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
@@ -118,20 +128,16 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)
     bg = np.asarray(cfg.background, np.float32)
-    cast_shadows = cfg.shadows and n_lights > 0 and geom.faces.shape[0] > 0
-    want_aov = any(a in cfg.aovs for a in ("N", "P"))
+    lit = [li for li in range(n_lights) if not _light_is_dark(shading.lights[li])]
+    counters["lights_skipped"] = n_lights - len(lit)
+    cast_shadows = cfg.shadows and len(lit) > 0 and geom.faces.shape[0] > 0
     offsets = sample_offsets(cfg.spp)
     single = len(offsets) == 1
-    # the frame's images are fresh arrays (they go to the writer thread); with
-    # one sample the shader writes them directly, else samples are averaged
-    acc_rgba = np.empty((H * W, 4), np.float32) if single else np.zeros((H * W, 4), np.float32)
+    # one sample: the pass writes the image; several: each adds 1/spp of its own
+    rgba = np.empty((H * W, 4), np.float32) if single else np.zeros((H * W, 4), np.float32)
     z = np.empty(H * W, np.float32) if single else np.full(H * W, np.inf, np.float32)
-    rgba = acc_rgba if single else buffers.rgba
-    z_s = z if single else buffers.z
-    aov_n = np.empty((H * W if want_aov else 0, 3), np.float32)
-    aov_p = np.empty_like(aov_n)
-    first_prim = None
-    for jitter in offsets:
+    aov_n = aov_p = first_prim = None
+    for pass_index, jitter in enumerate(offsets):
         t0 = time.perf_counter()
         if kd:
             hits = Hits(*kd_trace_camera(tree, tri_verts, cam, W, H, KD_PACKET, jitter))
@@ -151,38 +157,39 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["primary_tests"] += int(hits.counters[2])
 
         t0 = time.perf_counter()
-        vis = buffers.vis if cast_shadows else buffers.vis[:0]
+        surface = visible_surface(cam, jitter, hits.t, hits.prim, hits.b1, hits.b2, *layout,
+                                  tri_verts, geom.faces, normals, geom.tri_material,
+                                  shading.materials, geom.uvs, shading.tex_data, shading.tex_info,
+                                  buffers.work)
+        timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
+
+        t0 = time.perf_counter()
+        n_vis = surface.pixel.shape[0]
+        vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0))
         if cast_shadows:
-            visible = int(np.count_nonzero(hits.prim >= 0))   # padding slots are -1
-            for li in range(n_lights):
-                kind = int(shading.lights[li, 0])
+            vis[[li for li in range(n_lights) if li not in lit]] = 0.0
+            for li in lit:
+                rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
+                                 buffers.work)
                 if kd:
-                    _, c = kd_trace_light(tree, tri_verts, cam, W, H, hits, kind, shading.lights[li, 1:4],
-                                          jitter, vis[li], layout, (geom.faces, normals))
+                    _, c = kd_light_visibility(tree, tri_verts, rays, vis[li])
                 else:
-                    _, c = trace_light(grid, tri_verts, cam, W, H, hits, kind,
-                                       shading.lights[li, 1:4], cfg.packet, jitter, vis[li], layout,
-                                       (geom.faces, normals), cfg.grid_cull)
-                counters["shadow_rays"] += visible
+                    _, c = light_visibility(grid, tri_verts, rays, vis[li], cull=cfg.grid_cull)
+                counters["shadow_rays"] += rays.n_active
+                counters["shadow_rays_skipped"] += n_vis - rays.n_active
                 counters["tri_tests"] += int(c[2])
                 counters["cells"] += int(c[1])
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
-        shade_pixels(cam, W, H, np.float32(jitter[0]), np.float32(jitter[1]),
-                     hits.t, hits.prim, hits.b1, hits.b2, *layout, tri_verts, geom.faces, normals,
-                     geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
-                     shading.tex_info, shading.lights, vis, cast_shadows, bg,
-                     np.float32(cfg.ambient), rgba, z_s, want_aov and jitter == offsets[0],
-                     aov_n, aov_p)
-        if not single:
-            acc_rgba += rgba
-            np.minimum(z, z_s, out=z)
-        if first_prim is None and "id" in cfg.aovs:      # gathered to row-major here
-            first_prim = hits.prim[layout[0][:, None] + layout[1][None, :]].reshape(-1)
+        rgb = buffers.work.take("rgb", (3, n_vis))
+        shade_samples(surface.point, surface.smooth_n, surface.view, surface.albedo, surface.ks,
+                      surface.shininess, shading.lights, vis, cast_shadows, np.float32(cfg.ambient), rgb)
+        write_pixels(surface.pixel, rgb, surface.depth, bg, np.float32(1.0 / len(offsets)),
+                     not single, rgba, z)
+        if pass_index == 0:
+            aov_n, aov_p, first_prim = _first_pass_aovs(cfg.aovs, surface, W * H)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
-    if not single:
-        acc_rgba /= len(offsets)
     aovs = {}
     if "N" in cfg.aovs:
         for i, c in enumerate("XYZ"):
@@ -191,5 +198,21 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         for i, c in enumerate("XYZ"):
             aovs[f"P.{c}"] = aov_p[:, i].reshape(H, W)
     if "id" in cfg.aovs:
-        aovs["id"] = first_prim.astype(np.float32).reshape(H, W)
-    return FrameResult(acc_rgba.reshape(H, W, 4), z.reshape(H, W), aovs, timings, counters)
+        aovs["id"] = first_prim.reshape(H, W)
+    return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs, timings, counters)
+
+
+def _first_pass_aovs(names, surface, n_pix):
+    """N, P and id of the first sample of every pixel (0, 0 and -1 on a miss);
+    only those asked for."""
+    aov_n = aov_p = prim = None
+    if "N" in names:
+        aov_n = np.zeros((n_pix, 3), np.float32)
+        aov_n[surface.pixel] = surface.smooth_n.T
+    if "P" in names:
+        aov_p = np.zeros((n_pix, 3), np.float32)
+        aov_p[surface.pixel] = surface.point.T
+    if "id" in names:
+        prim = np.full(n_pix, -1.0, np.float32)
+        prim[surface.pixel] = surface.prim
+    return aov_n, aov_p, prim

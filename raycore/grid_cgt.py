@@ -41,7 +41,7 @@ OX, OY, OZ, DX, DY, DZ, TMIN, TMAX = 0, 1, 2, 3, 4, 5, 6, 7
 # permuted direction (DU, DV, DK), the exit distance from the grid (-inf = ray
 # not live) and t_min. The walk only reads it: a store into it inside the ray
 # loop would stop LLVM from vectorizing that loop (it cannot prove the rows
-# disjoint). DU and DV are filled only for shared-origin (camera) packets.
+# disjoint). DU and DV are read only by the shared-origin (camera, point light) walk.
 OU, OV, OK, SU, SV, SZ, DK, TEXIT, WTMIN, DU, DV = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
 N_WORK = 11
 # rows of the `sub` array (8, n_sub + 1): frustum bounds of each sub-packet,
@@ -150,6 +150,8 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
             work[SZ, j, r] = sz
             work[DK, j, r] = dk
             work[WTMIN, j, r] = rays[TMIN, j, r]
+            work[DU, j, r] = rays[DX + U, j, r]       # read only by the shared-origin walk
+            work[DV, j, r] = rays[DX + V, j, r]
             t0, t1 = slab_exit(rays[OX, j, r], rays[OY, j, r], rays[OZ, j, r],
                                F1 / rays[DX, j, r], F1 / rays[DY, j, r], F1 / rays[DZ, j, r],
                                rays[TMIN, j, r], rays[TMAX, j, r], g_lo, g_hi)

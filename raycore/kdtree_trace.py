@@ -28,7 +28,6 @@ from numba import prange
 from ._jit import fetch_add, helper, kernel, parallel_kernel
 from .camera import primary_dir_raw
 from .kdtree_build import LEAF, KdTree
-from .tiles import _shadow_ray
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
@@ -481,44 +480,13 @@ def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitte
     return (*out, counters.sum(axis=0))
 
 
-@parallel_kernel
-def kd_shadows(cam, width, height, jx, jy, light_kind, lx, ly, lz, offset_scale,
-               tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_verts,
-               hit_prim, hit_b1, hit_b2, row_off, col_off, faces, normals, out_vis, counters):
-    """Shadow rays of one light through the kd-tree, one any-hit ray per
-    visible pixel, set up exactly as the grid's (tiles._shadow_ray)."""
-    n_chunks = counters.shape[0]
-    for c in prange(n_chunks):
-        rays = np.empty((8, 1, 1), np.float32)
-        stack_n = np.empty(STACK, np.int32)
-        stack_t0 = np.empty(STACK, np.float32)
-        stack_t1 = np.empty(STACK, np.float32)
-        for y in range(c * height // n_chunks, (c + 1) * height // n_chunks):
-            for x in range(width):
-                _shadow_ray(rays, 0, 0, x, y, cam, width, height, jx, jy, light_kind, lx, ly, lz,
-                            offset_scale, tri_verts, hit_prim, hit_b1, hit_b2, row_off, col_off,
-                            faces, normals)
-                if not rays[7, 0, 0] >= rays[6, 0, 0]:
-                    continue
-                counters[c, 0] += 1
-                _, p, _, _ = trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi,
-                                       tri_verts, rays[0, 0, 0], rays[1, 0, 0], rays[2, 0, 0],
-                                       rays[3, 0, 0], rays[4, 0, 0], rays[5, 0, 0],
-                                       rays[6, 0, 0], rays[7, 0, 0], True, stack_n, stack_t0,
-                                       stack_t1, counters, c)
-                if p < 0:
-                    out_vis[row_off[y] + col_off[x]] = F1
-
-
-def kd_trace_light(tree: KdTree, tri_verts, cam, width, height, hits, light_kind, light_vec,
-                   jitter, vis, offsets, smooth):
-    """trace_light's kd-tree twin: visibility of one light into `vis`."""
-    import numba
-    from .config import EPS_SHADOW_REL
+def kd_light_visibility(tree: KdTree, tri_verts, rays, vis):
+    """light_visibility's kd-tree twin: the same shadow rays (shadow_packets.
+    LightRays), one any-hit single ray each, in the light-space order."""
     vis[:] = 0.0
-    counters = np.zeros((numba.get_num_threads() * 8, N_KD_COUNTERS), np.int64)
-    lx, ly, lz = (np.float32(c) for c in light_vec)
-    kd_shadows(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), light_kind,
-               lx, ly, lz, np.float32(EPS_SHADOW_REL), *tree_args(tree), tri_verts,
-               hits.prim, hits.b1, hits.b2, *offsets, *smooth, vis, counters)
-    return vis, counters.sum(axis=0)
+    idx = rays.order[:rays.n_active]
+    t, prim, _, _, counters = kd_trace_rays(tree, tri_verts, rays.origin[:, idx].T,
+                                            rays.direction[:, idx].T, rays.t_min[idx],
+                                            rays.t_max[idx], any_hit=True)
+    vis[idx] = (prim < 0).astype(np.float32)
+    return vis, counters

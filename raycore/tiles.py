@@ -5,8 +5,9 @@ and then pulls tile indices from a shared atomic counter until none are left,
 so a thread that drew cheap tiles (sky) takes more of them. Tiles are square,
 a multiple of the packet size, and many more than the threads.
 
-Two drivers share the packet machinery: primary rays from the camera, and
-shadow rays from visible surface points to one light.
+Two drivers share the packet machinery here: primary rays from the camera,
+and batches of arbitrary rays; shadow rays have their own order and driver
+(shadow_packets.py).
 """
 import numpy as np
 from numba import prange
@@ -17,7 +18,6 @@ from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_WORK, OK, OU
                        OX, OY, OZ, SU, SV, SZ, DU, DV, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
                        pick_axis, set_bounds, setup_rays, walk)
 from .grid_dda import dda_trace
-from .triangle import surface_point
 
 
 def tile_size_for(width: int, height: int, packet: int, threads: int) -> int:
@@ -106,12 +106,14 @@ def _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
 
 
 @kernel
-def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub,
-                       sub_active, sub_done, sub_skip, mailbox,
-                       g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                       tri_verts, eps, counters, tile, cull):
+def trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, sub,
+                      sub_active, sub_done, sub_skip, mailbox,
+                      g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
+                      tri_verts, eps, counters, tile, cull):
     """CGT for a packet of arbitrary rays, or single-ray DDA when the rays
-    share no major axis. Fills hit_* (prim -1: nothing before TMAX)."""
+    share no major axis. Fills hit_* (prim -1: nothing before TMAX).
+    shared_origin: every ray, padding included, starts at one point (rays
+    from a point light), which allows the cheaper edge-plane test."""
     for j in range(rays.shape[1]):
         for r in range(rays.shape[2]):
             hit_t[j, r] = rays[TMAX, j, r]
@@ -121,7 +123,7 @@ def _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, sub
         _dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, g_lo, g_hi, g_dims,
                     g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
     elif n_live > 0:
-        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False, K, s, k_ref, w_end,
+        walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
              sub, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
              cell_start, cell_tris, tri_verts, eps, counters, tile, cull)
 
@@ -340,189 +342,6 @@ def unswizzle(sw_t, sw_prim, sw_b1, sw_b2, row_off, col_off, out_t, out_prim, ou
             out_b2[p0 + x] = sw_b2[k]
 
 
-# a shadow ray to a point light stops this fraction of its length short of
-# the light, so a light placed on a surface does not shadow itself
-SHADOW_T_MAX_FRACTION = np.float32(1.0 - 1e-6)
-# a shadow packet whose longest ray is this much longer than its shortest is
-# traced as two (short and long rays apart); see trace_shadows
-SPLIT_RATIO = np.float32(1.25)
-
-
-@helper
-def _lift_to_smooth_surface(tri_verts, faces, normals, prim, b1, b2, px, py, pz, side):
-    """The hit point lifted off its flat facet toward the smooth surface the
-    vertex normals describe (Hanika 2021, "Hacking the shadow terminator"):
-    p' = p - sum_i b_i min(0, (p - v_i) . n_i) n_i, with the normals turned to
-    `side` (+1 or -1, the viewer's side of the facet). Also returns the
-    interpolated normal. Shadow rays from p' do not clip the neighbouring
-    facets, which otherwise cuts the lit side of a coarse curved mesh in steps."""
-    b0 = F1 - b1 - b2
-    qx = qy = qz = F0
-    sx = sy = sz = F0
-    for k in range(3):
-        w = b0 if k == 0 else (b1 if k == 1 else b2)
-        v = faces[prim, k]
-        nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
-        d = ((px - tri_verts[prim, 3 * k]) * nx + (py - tri_verts[prim, 3 * k + 1]) * ny
-             + (pz - tri_verts[prim, 3 * k + 2]) * nz)
-        lift = -w * min(d, F0)
-        qx += lift * nx
-        qy += lift * ny
-        qz += lift * nz
-        sx += w * nx
-        sy += w * ny
-        sz += w * nz
-    return px + qx, py + qy, pz + qz, sx, sy, sz
-
-
-@helper
-def _shadow_ray(rays, j, r, x, y, cam, width, height, jx, jy,
-                light_kind, lx, ly, lz, offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
-                row_off, col_off, faces, normals):
-    """Set up ray (j, r) of a shadow packet from pixel (x, y) toward the light;
-    inactive (TMAX < TMIN) for pixels outside the image, misses, and surfaces
-    facing away from the light: their visibility stays 0 (the caller zeroes
-    it). Early returns beat a branch-free version here (measured 48 vs 63 ms
-    per 1024^2 frame): misses skip all the work."""
-    rays[TMIN, j, r] = F0
-    rays[TMAX, j, r] = -F1
-    rays[OX, j, r] = cam[0]
-    rays[OY, j, r] = cam[1]
-    rays[OZ, j, r] = cam[2]
-    rays[DX, j, r] = cam[3]
-    rays[DY, j, r] = cam[4]
-    rays[DZ, j, r] = cam[5]
-    if x >= width or y >= height:
-        return
-    k = row_off[y] + col_off[x]         # where the hits of pixel (x, y) are
-    prim = hit_prim[k]
-    if prim < 0:
-        return
-    sx, sy, sz, nx, ny, nz = surface_point(tri_verts, prim, hit_b1[k], hit_b2[k])
-    vx, vy, vz = primary_dir(cam, x, y, jx, jy)
-    side = F1
-    if nx * vx + ny * vy + nz * vz > F0:
-        nx, ny, nz = -nx, -ny, -nz
-        side = -F1
-    # facing test with the geometric normal, or with the smooth one if given
-    fx, fy, fz = nx, ny, nz
-    if faces.shape[0] > 0:
-        sx, sy, sz, fx, fy, fz = _lift_to_smooth_surface(tri_verts, faces, normals, prim, hit_b1[k],
-                                                         hit_b2[k], sx, sy, sz, side)
-    off = offset_scale * (max(abs(sx), abs(sy), abs(sz)) + F1)
-    ox = sx + nx * off
-    oy = sy + ny * off
-    oz = sz + nz * off
-    if light_kind == 0:
-        dx = lx - ox
-        dy = ly - oy
-        dz = lz - oz
-    else:
-        dx = -lx
-        dy = -ly
-        dz = -lz
-    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-    if dist == F0 or fx * dx + fy * dy + fz * dz <= F0:
-        return
-    inv = F1 / dist
-    if light_kind == 0:
-        # traced from the light back to the point: a packet's rays then share
-        # their origin and its frustum is a thin cone; from the surface, the
-        # rays of a packet straddling a silhouette start metres apart and
-        # their common frustum sweeps through everything in between (8x the
-        # triangle tests on the runner scene). The segment is the same.
-        rays[OX, j, r] = lx
-        rays[OY, j, r] = ly
-        rays[OZ, j, r] = lz
-        rays[DX, j, r] = -dx * inv
-        rays[DY, j, r] = -dy * inv
-        rays[DZ, j, r] = -dz * inv
-        rays[TMIN, j, r] = dist * (F1 - SHADOW_T_MAX_FRACTION)
-        rays[TMAX, j, r] = dist
-        return
-    rays[OX, j, r] = ox
-    rays[OY, j, r] = oy
-    rays[OZ, j, r] = oz
-    rays[DX, j, r] = dx * inv
-    rays[DY, j, r] = dy * inv
-    rays[DZ, j, r] = dz * inv
-    rays[TMAX, j, r] = INF
-
-
-@parallel_kernel
-def trace_shadows(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
-                  light_kind, lx, ly, lz, offset_scale,
-                  g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  hit_prim, hit_b1, hit_b2, row_off, col_off, faces, normals, out_vis, counters,
-                  cull):
-    """Visibility (1 lit, 0 shadowed) of one light from every visible point;
-    hits of pixel (x, y) at row_off[y] + col_off[x] (see shade_pixels);
-    out_vis must be zeroed by the caller (only lit pixels are written).
-
-    light_kind 0 = point light at (lx, ly, lz); 1 = directional light shining
-    along (lx, ly, lz). Origins are pushed off the surface along the geometric
-    normal (turned to face the camera) by offset_scale * (|p|max + 1): enough to
-    escape the float32 rounding of p, far below the size of any real gap.
-    Points whose surface faces away from the light get 0 without a ray.
-    With vertex normals (faces (n_t, 3), normals (n_v, 3); empty arrays for
-    none) origins start from the smooth surface and the facing test uses the
-    smooth normal: no stepped shadow terminator on coarse curved meshes.
-    """
-    tiles_x, n_tiles = _tile_count(width, height, tile_size)
-    ss = sub_size * sub_size
-    n_sub = packet * packet // ss
-    next_tile = np.zeros(1, np.int64)
-    for _w in prange(n_workers):
-        rays, work, hit_t, occ_b1, occ_b2, occ_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
-            _scratch(packet, sub_size)
-        saved_tmax = np.empty((n_sub, ss), np.float32)
-        off_x, off_y = _ray_offsets(sub_size)
-        while True:
-            tile = fetch_add(next_tile, 0, 1)
-            if tile >= n_tiles:
-                break
-            tx0, ty0 = _tile_corner(tile, tiles_x, tile_size)
-            for py in range(ty0, min(ty0 + tile_size, height), packet):
-                for px in range(tx0, min(tx0 + tile_size, width), packet):
-                    for j in range(n_sub):
-                        x0, y0 = _sub_corner(px, py, j, packet, sub_size)
-                        for r in range(ss):
-                            _shadow_ray(rays, j, r, x0 + off_x[r], y0 + off_y[r],
-                                        cam, width, height, jx, jy, light_kind, lx, ly, lz,
-                                        offset_scale, tri_verts, hit_prim, hit_b1, hit_b2,
-                                        row_off, col_off, faces, normals)
-                    # point-light rays run from the light to the surface: where
-                    # their lengths jump (a silhouette against the ground behind),
-                    # trace the short and the long ones as two packets, so that
-                    # neither frustum sweeps through the other's geometry
-                    shortest = INF
-                    longest = F0
-                    for j in range(n_sub):
-                        for r in range(ss):
-                            saved_tmax[j, r] = rays[TMAX, j, r]
-                            if rays[TMAX, j, r] > rays[TMIN, j, r]:
-                                shortest = min(shortest, rays[TMAX, j, r])
-                                longest = max(longest, rays[TMAX, j, r])
-                    split = light_kind == 0 and longest > SPLIT_RATIO * shortest
-                    cut = np.sqrt(shortest * longest)
-                    for part in range(2 if split else 1):
-                        if split:
-                            for j in range(n_sub):
-                                for r in range(ss):
-                                    mine = (saved_tmax[j, r] <= cut) == (part == 0)
-                                    rays[TMAX, j, r] = saved_tmax[j, r] if mine else -F1
-                        _trace_or_fallback(rays, work, hit_t, occ_b1, occ_b2, occ_prim, True,
-                                           sub, sub_active, sub_done, sub_skip, mailbox,
-                                           g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                                           tri_verts, eps, counters, tile, cull)
-                        for j in range(n_sub):
-                            x0, y0 = _sub_corner(px, py, j, packet, sub_size)
-                            for r in range(ss):
-                                if rays[TMAX, j, r] > rays[TMIN, j, r]:
-                                    p = (y0 + off_y[r]) * width + x0 + off_x[r]
-                                    out_vis[p] = F1 if occ_prim[j, r] < 0 else F0
-
-
 @parallel_kernel
 def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, any_hit,
                     g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
@@ -552,10 +371,10 @@ def trace_ray_batch(origins, dirs, t_min, t_max, packet, sub_size, n_workers, an
                         rays[DX + a, j, r] = dirs[k, a]
                     rays[TMIN, j, r] = t_min[k]
                     rays[TMAX, j, r] = t_max[k] if i < n else -F1
-            _trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
-                               sub, sub_active, sub_done, sub_skip, mailbox,
-                               g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                               tri_verts, eps, counters, pk, cull)
+            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False,
+                              sub, sub_active, sub_done, sub_skip, mailbox,
+                              g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
+                              tri_verts, eps, counters, pk, cull)
             for j in range(n_sub):
                 for r in range(ss):
                     i = pk * per_packet + j * ss + r

@@ -4,11 +4,12 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .config import EPS_CULL_REL, EPS_SHADOW_REL
+from .config import EPS_CULL_REL
 from .grid_build import Grid
 from .grid_cgt import N_COUNTERS
-from .tiles import (swizzle_offsets, tile_size_for, trace_primary, trace_ray_batch,
-                    trace_shadows, unswizzle)
+from .shadow_packets import SHADOW_PACKET, LightRays, trace_ordered
+from .surface import Surface, visible_surface
+from .tiles import swizzle_offsets, tile_size_for, trace_primary, trace_ray_batch, unswizzle
 
 PACKET_SIZES = (4, 8, 16, 32)
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
@@ -105,26 +106,49 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
 NO_SMOOTH = (np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
 
 
-def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
-                packet=8, jitter=(0.5, 0.5), vis=None, offsets=None, smooth=None, cull=True):
-    """Visibility (H*W,) f32 of one light (kind 0 point at light_vec, 1
-    directional along light_vec) from the surface points in `hits`, and the
-    (N_COUNTERS,) counters. `vis` may be a reused (H*W,) f32 buffer;
-    `offsets` (row_off, col_off) locate packet-major hits (default row-major);
-    `smooth` (faces, vertex normals): start shadow rays from the smooth surface."""
-    row_off, col_off = offsets if offsets is not None else row_major_offsets(width, height)
-    sub, tile, n_tiles, threads = _layout(width, height, packet)
-    if vis is None:
-        vis = np.empty(width * height, np.float32)
+def light_visibility(grid: Grid, tri_verts, rays: LightRays, vis=None, packet=SHADOW_PACKET,
+                     cull=True):
+    """Visibility (n,) f32 (1 lit, 0 shadowed or facing away) of one light's
+    shadow rays, traced in light-space packets, and the (N_COUNTERS,) counters."""
+    n = rays.t_max.shape[0]
+    sub = _sub_size(packet)
+    threads = numba.get_num_threads()
+    vis = np.empty(n, np.float32) if vis is None else vis
     vis[:] = 0.0
-    counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
-    lx, ly, lz = (np.float32(c) for c in light_vec)
-    trace_shadows(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
-                  packet, sub, tile, threads, light_kind, lx, ly, lz, np.float32(EPS_SHADOW_REL),
-                  *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
-                  hits.prim, hits.b1, hits.b2, row_off, col_off, *(smooth or NO_SMOOTH), vis, counters,
-                  cull)
+    n_packets = max(1, -(-rays.n_active // (packet * packet)))
+    counters = np.zeros((n_packets, N_COUNTERS), np.int64)
+    trace_ordered(rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
+                  rays.shared_origin, packet, sub, threads, *grid[:5], grid.cell_start,
+                  grid.cell_tris, tri_verts, _cull_eps(grid), vis, counters, cull)
     return vis, counters.sum(axis=0)
+
+
+def surface_of(hits: Hits, tri_verts, cam, width, height, jitter=(0.5, 0.5), offsets=None,
+               smooth=None) -> Surface:
+    """The visible Surface of `hits` (row-major, or packet-major with
+    `offsets`), untextured, with the default material; `smooth` (faces,
+    vertex normals) lifts shadow origins toward the smooth surface."""
+    row_off, col_off = offsets if offsets is not None else row_major_offsets(width, height)
+    faces, normals = smooth or NO_SMOOTH
+    material = np.array([[0.8, 0.8, 0.8, 0, 1, -1, 0, 0]], np.float32)
+    return visible_surface(cam, jitter, hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off,
+                           tri_verts, faces, normals, np.zeros(tri_verts.shape[0], np.int32),
+                           material, np.zeros((0, 2), np.float32), np.zeros(1, np.float32),
+                           np.zeros((0, 3), np.int64))
+
+
+def trace_light(grid: Grid, tri_verts, cam, width, height, hits: Hits, light_kind, light_vec,
+                packet=SHADOW_PACKET, jitter=(0.5, 0.5), offsets=None, smooth=None, cull=True):
+    """Per-pixel visibility (H*W,) f32 of one light (kind 0 point at
+    light_vec, 1 directional along light_vec) from the surface points in
+    `hits`, and the counters: surface_of, LightRays and light_visibility in
+    one call (for tests and tools; the frame calls them apart)."""
+    surface = surface_of(hits, tri_verts, cam, width, height, jitter, offsets, smooth)
+    vis_s, counters = light_visibility(grid, tri_verts, LightRays(surface, light_kind, light_vec),
+                                       packet=packet, cull=cull)
+    vis = np.zeros(width * height, np.float32)
+    vis[surface.pixel] = vis_s
+    return vis, counters
 
 
 def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, packet=8,

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from conftest import soup, tri_verts_of
-from oracles import brute_force_closest, camera_rays, kernel_camera_rays
+from oracles import brute_force_closest, camera_rays, kernel_camera_rays, shadow_origin
 from raycore.camera import camera_basis
 from raycore.grid_build import build_grid
 from raycore.trace import trace_camera, trace_rays
@@ -145,8 +145,6 @@ def test_camera_rays_follow_the_spec_formula(rng):
 def test_shadow_visibility_matches_brute_force(rng):
     """Point and directional light visibility against brute-force occlusion of
     the same lifted surface points."""
-    from raycore.config import EPS_SHADOW_REL
-    from raycore.triangle import surface_point
     from raycore.trace import trace_light
     tv = soup(rng, 1200, spread=3.0, size=0.3)
     floor = np.array([[-4, -2, -4, 4, -2, -4, 0, -2, 4], [-4, -2, 4, 4, -2, 4, 0, -2, -4]], np.float32)
@@ -162,15 +160,9 @@ def test_shadow_visibility_matches_brute_force(rng):
             vis, _ = trace_light(grid, tv, cam, w, h, hits, kind, vec, packet)
             checked = 0
             for p in np.nonzero(hits.prim >= 0)[0]:
-                sx, sy, sz, nx, ny, nz = surface_point(tv, hits.prim[p], hits.b1[p], hits.b2[p])
-                n = np.array([nx, ny, nz], np.float32)
-                if n @ dirs[p] > 0:
-                    n = -n
-                pt = np.array([sx, sy, sz], np.float32)
-                off = np.float32(EPS_SHADOW_REL) * (np.abs(pt).max() + 1)
-                o = (pt + n * off).astype(np.float32)
-                to_light = (vec - o) if kind == 0 else -vec
-                if n @ to_light <= 0:
+                o, facing, to_light = shadow_origin(tv, hits.prim[p], hits.b1[p], hits.b2[p], dirs[p], kind, vec)
+                o = o.astype(np.float32)
+                if not facing:
                     assert vis[p] == 0
                     continue
                 dist = np.linalg.norm(to_light) if kind == 0 else np.inf

@@ -1,7 +1,7 @@
 """Texture lookup: texel centres exact, bilinear between them, wrap-around."""
 import numpy as np
 
-from raycore.shade import sample_texture
+from raycore.surface import sample_texture
 
 
 def texture(w=4, h=3):

@@ -4,9 +4,8 @@ sphere (every pixel the smooth normal turns to the light is lit)."""
 import numpy as np
 
 from conftest import icosphere_mesh, tri_verts_of
-from oracles import brute_force_closest, kernel_camera_rays
+from oracles import brute_force_closest, kernel_camera_rays, shadow_origin
 from raycore.camera import camera_basis
-from raycore.config import EPS_SHADOW_REL
 from raycore.grid_build import build_grid
 from raycore.mesh import vertex_face_csr, vertex_normals
 from raycore.trace import trace_camera, trace_light
@@ -35,21 +34,9 @@ def test_smooth_shadow_origins_match_brute_force():
     vis, _ = trace_light(grid, tv, cam, w, h, hits, 0, light, 8, smooth=(faces, normals))
     checked = 0
     for p in np.nonzero(hits.prim >= 0)[0]:
-        prim, b1, b2 = hits.prim[p], hits.b1[p], hits.b2[p]
-        sx, sy, sz, nx, ny, nz = surface_point(tv, prim, b1, b2)
-        n = np.array([nx, ny, nz], np.float64)
-        side = -1.0 if n @ dirs[p] > 0 else 1.0
-        n *= side
-        pt = np.array([sx, sy, sz], np.float64)
-        bary = (1 - b1 - b2, b1, b2)
-        lifted, smooth_n = pt.copy(), np.zeros(3)
-        for k in range(3):
-            vn = side * normals[faces[prim, k]].astype(np.float64)
-            lifted -= bary[k] * min((pt - verts[faces[prim, k]]) @ vn, 0.0) * vn
-            smooth_n += bary[k] * vn
-        o = lifted + n * EPS_SHADOW_REL * (np.abs(lifted).max() + 1)
-        to_light = light - o
-        if smooth_n @ to_light <= 0:
+        o, facing, to_light = shadow_origin(tv, hits.prim[p], hits.b1[p], hits.b2[p], dirs[p], 0, light,
+                                            faces, normals)
+        if not facing:
             assert vis[p] == 0
             continue
         dist = np.linalg.norm(to_light)

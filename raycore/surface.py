@@ -1,0 +1,238 @@
+"""Visible surface samples: the hits of one pass of camera rays, compacted
+and turned into what shading and shadow rays need, once per pass.
+
+Shading and every light read the same structure-of-arrays rows, so each
+hit's triangle, normals and material are gathered once, not once per light,
+and the per-light loops run over contiguous rows that vectorize.
+
+Arrays of n visible samples (pixels whose camera ray hit), row-major order:
+  pixel (n,) i32        row-major pixel index
+  prim (n,) i32         triangle hit
+  point (3, n) f32      hit point from the barycentrics
+  lifted (3, n) f32     the point lifted toward the smooth surface the vertex
+                        normals describe (Hanika 2021), where shadow rays start
+  geo_n (3, n) f32      unit geometric normal, turned to the viewer
+  smooth_n (3, n) f32   unit interpolated vertex normal, turned to the viewer
+  view (3, n) f32       unit camera-ray direction
+  depth (n,) f32        distance along the view axis (SPEC Z)
+  mag (n,) f32          max |coordinate| of the hit triangle's vertices and of
+                        the lifted point: the scale of their float32 error
+  albedo (3, n) f32     diffuse colour, texture applied
+  ks, shininess (n,)    specular weight and exponent
+"""
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import prange
+
+from ._jit import helper, parallel_arith_kernel
+from .camera import primary_dir
+from .workspace import scratch
+
+F0 = np.float32(0.0)
+F1 = np.float32(1.0)
+HALF = np.float32(0.5)
+
+
+class Surface(NamedTuple):
+    pixel: np.ndarray
+    prim: np.ndarray
+    point: np.ndarray
+    lifted: np.ndarray
+    geo_n: np.ndarray
+    smooth_n: np.ndarray
+    view: np.ndarray
+    depth: np.ndarray
+    mag: np.ndarray
+    albedo: np.ndarray
+    ks: np.ndarray
+    shininess: np.ndarray
+
+
+@helper
+def sample_texture(tex_data, tex_info, tex, u, v):
+    """Bilinear lookup with wrap-around; v = 0 is the bottom row. float32
+    coordinates (an int64 size would turn them float64) and a +-w wrap, since
+    texel indices only leave [0, w) by one."""
+    off = tex_info[tex, 0]
+    w = tex_info[tex, 1]
+    h = tex_info[tex, 2]
+    fx = (u - np.floor(u)) * np.float32(w) - HALF
+    fy = (F1 - (v - np.floor(v))) * np.float32(h) - HALF
+    x0 = int(np.floor(fx))
+    y0 = int(np.floor(fy))
+    ax = fx - np.float32(x0)
+    ay = fy - np.float32(y0)
+    r = g = b = F0
+    for dy in range(2):
+        yi = y0 + dy
+        yi = yi + h if yi < 0 else (yi - h if yi >= h else yi)
+        wy = ay if dy else F1 - ay
+        for dx in range(2):
+            xi = x0 + dx
+            xi = xi + w if xi < 0 else (xi - w if xi >= w else xi)
+            wgt = (ax if dx else F1 - ax) * wy
+            k = off + (yi * w + xi) * 3
+            r += wgt * tex_data[k]
+            g += wgt * tex_data[k + 1]
+            b += wgt * tex_data[k + 2]
+    return r, g, b
+
+
+@parallel_arith_kernel
+def count_hits(hit_prim, row_off, col_off, row_count):
+    """Visible samples per image row (row_count (H,) i64)."""
+    width = col_off.shape[0]
+    for y in prange(row_off.shape[0]):
+        base = row_off[y]
+        c = 0
+        for x in range(width):
+            c += 1 if hit_prim[base + col_off[x]] >= 0 else 0
+        row_count[y] = c
+
+
+@parallel_arith_kernel
+def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_start,
+                 tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
+                 pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess,
+                 hit_t, n_threads):
+    """Fill the Surface rows of the visible samples; row y's samples start at
+    row_start[y]. Normals are turned to the viewer's side; the lift and the
+    smooth normal use the vertex normals turned the same way."""
+    width = col_off.shape[0]
+    height = row_off.shape[0]
+    has_uv = uvs.shape[0] > 0
+    # rows dealt out in turn: prange splits statically, and the visible
+    # surface is rarely spread evenly over the image's halves
+    for t in prange(n_threads):
+        for y in range(t, height, n_threads):
+            i = row_start[y]
+            base = row_off[y]
+            for x in range(width):
+                k = base + col_off[x]
+                prim = hit_prim[k]
+                if prim < 0:
+                    continue
+                pixel[i] = y * width + x
+                prim_out[i] = prim
+                b1 = hit_b1[k]
+                b2 = hit_b2[k]
+                b0 = F1 - b1 - b2
+                dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+                view[0, i] = dx
+                view[1, i] = dy
+                view[2, i] = dz
+                depth[i] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
+                # point and geometric normal, turned to the viewer
+                m = F0
+                px = py = pz = F0
+                for c in range(3):
+                    a = tri_verts[prim, c]
+                    b = tri_verts[prim, 3 + c]
+                    e = tri_verts[prim, 6 + c]
+                    m = max(m, abs(a), abs(b), abs(e))
+                    if c == 0:
+                        px = b0 * a + b1 * b + b2 * e
+                    elif c == 1:
+                        py = b0 * a + b1 * b + b2 * e
+                    else:
+                        pz = b0 * a + b1 * b + b2 * e
+                e1x = tri_verts[prim, 3] - tri_verts[prim, 0]
+                e1y = tri_verts[prim, 4] - tri_verts[prim, 1]
+                e1z = tri_verts[prim, 5] - tri_verts[prim, 2]
+                e2x = tri_verts[prim, 6] - tri_verts[prim, 0]
+                e2y = tri_verts[prim, 7] - tri_verts[prim, 1]
+                e2z = tri_verts[prim, 8] - tri_verts[prim, 2]
+                gx = e1y * e2z - e1z * e2y
+                gy = e1z * e2x - e1x * e2z
+                gz = e1x * e2y - e1y * e2x
+                gl = np.sqrt(gx * gx + gy * gy + gz * gz)
+                gi = F1 / gl if gl > F0 else F0
+                gx, gy, gz = gx * gi, gy * gi, gz * gi
+                side = F1
+                if gx * dx + gy * dy + gz * dz > F0:
+                    gx, gy, gz = -gx, -gy, -gz
+                    side = -F1
+                # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
+                qx = qy = qz = F0
+                sx = sy = sz = F0
+                smooth = faces.shape[0] > 0
+                i0 = faces[prim, 0] if smooth else 0
+                i1 = faces[prim, 1] if smooth else 0
+                i2 = faces[prim, 2] if smooth else 0
+                for c in range(3 if smooth else 0):
+                    w = b0 if c == 0 else (b1 if c == 1 else b2)
+                    v = i0 if c == 0 else (i1 if c == 1 else i2)
+                    nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
+                    d = ((px - tri_verts[prim, 3 * c]) * nx + (py - tri_verts[prim, 3 * c + 1]) * ny
+                         + (pz - tri_verts[prim, 3 * c + 2]) * nz)
+                    lift = -w * min(d, F0)
+                    qx += lift * nx
+                    qy += lift * ny
+                    qz += lift * nz
+                    sx += w * nx
+                    sy += w * ny
+                    sz += w * nz
+                sl = np.sqrt(sx * sx + sy * sy + sz * sz)
+                if sl > F0:
+                    sx, sy, sz = sx / sl, sy / sl, sz / sl
+                else:
+                    sx, sy, sz = gx, gy, gz
+                lx, ly, lz = px + qx, py + qy, pz + qz
+                point[0, i] = px
+                point[1, i] = py
+                point[2, i] = pz
+                lifted[0, i] = lx
+                lifted[1, i] = ly
+                lifted[2, i] = lz
+                mag[i] = max(m, abs(lx), abs(ly), abs(lz))
+                geo_n[0, i] = gx
+                geo_n[1, i] = gy
+                geo_n[2, i] = gz
+                smooth_n[0, i] = sx
+                smooth_n[1, i] = sy
+                smooth_n[2, i] = sz
+                # material, texture applied
+                mat = tri_material[prim]
+                kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]
+                tex = int(materials[mat, 5])
+                if tex >= 0 and has_uv and smooth:
+                    tu = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+                    tv = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+                    tr, tg, tb = sample_texture(tex_data, tex_info, tex, tu, tv)
+                    kr *= tr
+                    kg *= tg
+                    kb *= tb
+                albedo[0, i] = kr
+                albedo[1, i] = kg
+                albedo[2, i] = kb
+                ks[i] = materials[mat, 3]
+                shininess[i] = materials[mat, 4]
+                i += 1
+
+
+def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
+                    tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
+                    tex_info, workspace=None) -> Surface:
+    """The Surface of one pass of camera rays (hits of pixel (x, y) at
+    row_off[y] + col_off[x]); faces (n_t, 3) and vertex normals of every
+    triangle, or (0, 3) arrays for flat facets (no lift, geometric normals).
+    With a Workspace the arrays are reused buffers, valid until its next use."""
+    height = row_off.shape[0]
+    row_count = np.empty(height, np.int64)
+    count_hits(hit_prim, row_off, col_off, row_count)
+    row_start = np.zeros(height + 1, np.int64)
+    np.cumsum(row_count, out=row_start[1:])
+    n = int(row_start[-1])
+    f32 = np.float32
+
+    def take(name, shape, dtype=f32):
+        return scratch(workspace, "surface." + name, shape, dtype)
+    s = Surface(*(take(name, (n,) if name in ("pixel", "prim", "depth", "mag", "ks", "shininess")
+                       else (3, n), np.int32 if name in ("pixel", "prim") else f32)
+                  for name in Surface._fields))
+    fill_surface(cam, f32(jitter[0]), f32(jitter[1]), hit_prim, hit_b1, hit_b2, row_off, col_off,
+                 row_start, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
+                 tex_info, *s, hit_t, numba.get_num_threads())
+    return s

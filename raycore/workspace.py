@@ -1,0 +1,32 @@
+"""Work arrays kept from frame to frame.
+
+A fresh array of a few MB costs a page fault per 4 KB page the first time it
+is written (the kernel zero-fills it): ~25 ms per frame for the ~100 MB that
+the surface, shadow and shading passes use at 1024^2. A Workspace hands out
+C-contiguous views of buffers it keeps, grown when a frame needs more.
+"""
+import numpy as np
+
+
+class Workspace:
+    def __init__(self):
+        self._buffers = {}
+
+    def take(self, name: str, shape, dtype=np.float32) -> np.ndarray:
+        """An uninitialised C-contiguous array of `shape`; the same memory is
+        handed out again for `name` on the next call (never two live uses)."""
+        shape = tuple(int(s) for s in np.atleast_1d(shape))
+        size = int(np.prod(shape))
+        dtype = np.dtype(dtype)
+        buf = self._buffers.get(name)
+        if buf is None or buf.dtype != dtype or buf.size < size:
+            buf = np.empty(max(size, 1), dtype)
+            self._buffers[name] = buf
+        return buf[:size].reshape(shape)
+
+
+def scratch(workspace, name, shape, dtype=np.float32):
+    """workspace.take, or a fresh array when there is no workspace."""
+    if workspace is None:
+        return np.empty(shape, dtype)
+    return workspace.take(name, shape, dtype)
