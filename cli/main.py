@@ -134,10 +134,11 @@ def _int_list(text, name, allowed=None):
                    "spacing on the scenes that know their exact motion, plus a bouncing-ball stiff case; "
                    "prints measured convergence orders and writes a JSON and a log-log plot.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="With --error: where to write the plot (default interp_error.png; the JSON goes "
-                   "next to it unless --json is given).")
+              help="A PNG: stacked bars of median ms per phase (interp, build, trace, shade, shadow, "
+                   "write) per scene; with --error, the error plot (default interp_error.png; the JSON "
+                   "goes next to it unless --json is given).")
 def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_report, plot_path):
-    """Measure fps per phase (interp, build, trace, shade, shadow) on built-in scenes,
+    """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
     from raycore._jit import set_threads
@@ -164,6 +165,10 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     n_threads = set_threads(threads)
     rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", (4, 8, 16, 32)), n_threads, accels)
     bench_table(rows)
+    if plot_path:
+        from .bench import plot_phases
+        plot_phases(rows, plot_path)
+        click.echo(f"wrote {plot_path}")
     if json_path:
         json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(rows, indent=1))

@@ -41,8 +41,8 @@ def summary_table(stats):
 def bench_table(rows):
     """One line per scene and packet size; the fastest fps_raycast per scene marked."""
     table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
-    for col in ("scene", "accel", "tris", "res", "packet", "threads", "build", "trace", "shade", "shadow",
-                "fps_raycast", "fps_full", "Mrays/s", "tests/ray"):
+    for col in ("scene", "accel", "tris", "res", "packet", "threads", "interp", "build", "trace", "shade",
+                "shadow", "write", "fps_raycast", "fps_full", "Mrays/s", "shadow Mrays/s", "tests/ray"):
         table.add_column(col, justify="right")
     best = {}
     for r in rows:
@@ -51,13 +51,14 @@ def bench_table(rows):
     for r in rows:
         mark = " *" if best[r["scene"]][1] == (r["accel"], r["packet"]) else ""
         table.add_row(r["scene"], r["accel"], str(r["triangles"]), str(r["resolution"]), f"{r['packet']}{mark}",
-                      str(r["threads"]), f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
-                      f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['fps_raycast']:.1f}",
-                      f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",
+                      str(r["threads"]), f"{r['interp_ms']:.2f}", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
+                      f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['write_ms']:.1f}",
+                      f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",
+                      f"{r['shadow_mrays_per_s']:.1f}",
                       f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}")
     console = Console()
     if not console.is_terminal:
-        console = Console(width=160)      # a pipe or file gets the whole table
+        console = Console(width=190)      # a pipe or file gets the whole table
     console.print(table)
 
 

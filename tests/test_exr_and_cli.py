@@ -99,14 +99,17 @@ def test_check_summarises(small_demo):
 def test_bench_writes_spec_rows(tmp_path):
     out = tmp_path / "bench.json"
     res = CliRunner().invoke(main, ["bench", "--scene", "demo", "--res", "32", "--frames", "2",
-                                    "--packet", "8,16", "--json", str(out)])
+                                    "--packet", "8,16", "--json", str(out), "--plot", str(tmp_path / "b.png")])
     assert res.exit_code == 0, res.output
     rows = json.loads(out.read_text())
     assert [r["packet"] for r in rows] == [8, 16]
     for key in ("scene", "accel", "packet", "threads", "triangles", "build_ms", "trace_ms", "shade_ms",
-                "shadow_ms", "fps_raycast", "fps_full", "mrays_per_s", "tri_tests"):
+                "shadow_ms", "fps_raycast", "fps_full", "mrays_per_s", "tri_tests",
+                "write_ms", "shadow_mrays_per_s"):
         assert key in rows[0]
     assert rows[0]["triangles"] == 7330 and rows[0]["fps_raycast"] > 0
+    assert rows[0]["write_ms"] > 0 and rows[0]["shadow_mrays_per_s"] > 0
+    assert (tmp_path / "b.png").stat().st_size > 1000
 
 
 def test_bench_rejects_unknown_scene_and_packet():
