@@ -165,7 +165,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
         t0 = time.perf_counter()
         n_vis = surface.pixel.shape[0]
-        vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0))
+        vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
         if cast_shadows:
             vis[[li for li in range(n_lights) if li not in lit]] = 0.0
             for li in lit:
@@ -182,7 +182,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()
-        rgb = buffers.work.take("rgb", (3, n_vis))
+        rgb = buffers.work.take("rgb", (3, n_vis), capacity=3 * W * H)
         shade_samples(surface.point, surface.smooth_n, surface.view, surface.albedo, surface.ks,
                       surface.shininess, shading.lights, vis, cast_shadows, np.float32(cfg.ambient), rgb)
         write_pixels(surface.pixel, rgb, surface.depth, bg, np.float32(1.0 / len(offsets)),

@@ -232,8 +232,11 @@ class LightRays:
         n = surface.mag.shape[0]
         f32 = np.float32
 
+        capacity = surface.pixel.base.size if surface.pixel.base is not None else n
+
         def take(name, shape, dtype=f32):
-            return scratch(workspace, "light." + name, shape, dtype)
+            return scratch(workspace, "light." + name, shape, dtype,
+                           capacity * (3 if isinstance(shape, tuple) else 1))
         self.kind = int(kind)
         self.origin = take("origin", (3, n))
         self.direction = take("direction", (3, n))

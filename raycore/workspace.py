@@ -12,21 +12,23 @@ class Workspace:
     def __init__(self):
         self._buffers = {}
 
-    def take(self, name: str, shape, dtype=np.float32) -> np.ndarray:
+    def take(self, name: str, shape, dtype=np.float32, capacity: int = 0) -> np.ndarray:
         """An uninitialised C-contiguous array of `shape`; the same memory is
-        handed out again for `name` on the next call (never two live uses)."""
+        handed out again for `name` on the next call (never two live uses).
+        A new buffer holds at least `capacity` elements, so that a count that
+        grows from frame to frame (visible pixels) does not reallocate."""
         shape = tuple(int(s) for s in np.atleast_1d(shape))
         size = int(np.prod(shape))
         dtype = np.dtype(dtype)
         buf = self._buffers.get(name)
         if buf is None or buf.dtype != dtype or buf.size < size:
-            buf = np.empty(max(size, 1), dtype)
+            buf = np.empty(max(size, capacity, 1), dtype)
             self._buffers[name] = buf
         return buf[:size].reshape(shape)
 
 
-def scratch(workspace, name, shape, dtype=np.float32):
+def scratch(workspace, name, shape, dtype=np.float32, capacity=0):
     """workspace.take, or a fresh array when there is no workspace."""
     if workspace is None:
         return np.empty(shape, dtype)
-    return workspace.take(name, shape, dtype)
+    return workspace.take(name, shape, dtype, capacity)
