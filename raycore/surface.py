@@ -28,6 +28,7 @@ from numba import prange
 
 from ._jit import helper, parallel_arith_kernel
 from .camera import primary_dir
+from .triangle import surface_point
 from .workspace import scratch
 
 F0 = np.float32(0.0)
@@ -124,32 +125,12 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_st
                 view[1, i] = dy
                 view[2, i] = dz
                 depth[i] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
-                # point and geometric normal, turned to the viewer
+                # point and unit geometric normal, turned to the viewer; the
+                # largest vertex coordinate scales the point's float32 error
+                px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
                 m = F0
-                px = py = pz = F0
-                for c in range(3):
-                    a = tri_verts[prim, c]
-                    b = tri_verts[prim, 3 + c]
-                    e = tri_verts[prim, 6 + c]
-                    m = max(m, abs(a), abs(b), abs(e))
-                    if c == 0:
-                        px = b0 * a + b1 * b + b2 * e
-                    elif c == 1:
-                        py = b0 * a + b1 * b + b2 * e
-                    else:
-                        pz = b0 * a + b1 * b + b2 * e
-                e1x = tri_verts[prim, 3] - tri_verts[prim, 0]
-                e1y = tri_verts[prim, 4] - tri_verts[prim, 1]
-                e1z = tri_verts[prim, 5] - tri_verts[prim, 2]
-                e2x = tri_verts[prim, 6] - tri_verts[prim, 0]
-                e2y = tri_verts[prim, 7] - tri_verts[prim, 1]
-                e2z = tri_verts[prim, 8] - tri_verts[prim, 2]
-                gx = e1y * e2z - e1z * e2y
-                gy = e1z * e2x - e1x * e2z
-                gz = e1x * e2y - e1y * e2x
-                gl = np.sqrt(gx * gx + gy * gy + gz * gz)
-                gi = F1 / gl if gl > F0 else F0
-                gx, gy, gz = gx * gi, gy * gi, gz * gi
+                for c in range(9):
+                    m = max(m, abs(tri_verts[prim, c]))
                 side = F1
                 if gx * dx + gy * dy + gz * dz > F0:
                     gx, gy, gz = -gx, -gy, -gz
