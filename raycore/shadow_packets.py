@@ -232,6 +232,8 @@ class LightRays:
         n = surface.mag.shape[0]
         f32 = np.float32
 
+        # a Surface from a Workspace is a view of a buffer sized for every pixel:
+        # size these alike, so that they are not reallocated as n grows
         capacity = surface.pixel.base.size if surface.pixel.base is not None else n
 
         def take(name, shape, dtype=f32):

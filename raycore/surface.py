@@ -104,6 +104,7 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_st
     width = col_off.shape[0]
     height = row_off.shape[0]
     has_uv = uvs.shape[0] > 0
+    smooth = faces.shape[0] > 0          # vertex normals given: lift and smooth normal
     # rows dealt out in turn: prange splits statically, and the visible
     # surface is rarely spread evenly over the image's halves
     for t in prange(n_threads):
@@ -138,7 +139,6 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_st
                 # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
                 qx = qy = qz = F0
                 sx = sy = sz = F0
-                smooth = faces.shape[0] > 0
                 i0 = faces[prim, 0] if smooth else 0
                 i1 = faces[prim, 1] if smooth else 0
                 i2 = faces[prim, 2] if smooth else 0

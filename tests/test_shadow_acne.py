@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from conftest import tri_verts_of
-from oracles import camera_rays
 from raycore.camera import camera_basis
 from raycore.grid_build import build_grid
 from raycore.trace import trace_camera, trace_light
