@@ -49,8 +49,8 @@ def compare(path, names, n_frames, res, threads):
             timings.append({"interp_ms": interp_ms, **result.timings,
                             "primary_tests": c["primary_tests"], "tri_tests": c["tri_tests"],
                             "visits_per_packet": c["primary_visits"] / max(c["primary_packets"], 1)})
-            if i == 0:
-                images[name] = result
+            if i == 0:      # kept past later frames, which reuse the renderer's image ring
+                images[name] = result._replace(rgba=result.rgba.copy(), z=result.z.copy())
         fps_raycast, fps_full = fps_of(timings)
         from raycore.frame import KD_PACKET
         rows.append({"structure": name, "triangles": int(scene.faces.shape[0]), "resolution": res,

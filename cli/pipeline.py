@@ -106,7 +106,9 @@ class SceneRenderer:
     def __init__(self, scene: AnimatedScene, cfg: RenderConfig, shading: Shading):
         self.scene, self.cfg, self.shading = scene, cfg, shading
         self.vf = vertex_face_csr(scene.faces, scene.n_vertices)
-        self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
+        # image ring: the frame being written, the one being rendered, and every write in flight
+        self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet,
+                                    n_images=MAX_PENDING_WRITES + 2)
         # static objects: gathered, binned and given normals once (raycore/scene_grid.py)
         self.scene_grid = SceneGrid(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
                                     scene.moving_triangles)
@@ -158,8 +160,9 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
             while len(pending) > MAX_PENDING_WRITES:
                 pending.pop(0).result()
             t = scene.time_of(frame)
-            # a frame's images are fresh arrays (only work buffers are reused),
-            # so the writer thread never sees them overwritten
+            # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
+            # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
+            # writer thread never sees its images overwritten
             interp_ms, result = renderer.render(t)
             tm = result.timings
             rays = result.counters["rays"]

@@ -75,12 +75,29 @@ def sample_offsets(spp: int) -> list:
 
 class FrameBuffers:
     """Per-pixel work arrays kept from frame to frame (same resolution): fresh
-    large arrays cost page faults on every frame."""
+    large arrays cost page faults on every frame (~5 ms for a 1024^2 RGBA + Z
+    on this machine kind).
 
-    def __init__(self, width, height, n_lights, packet):
+    The images a frame returns come from a ring of `n_images` sets: frame k's
+    images stay untouched until frame k + n_images is rendered with these
+    buffers. A caller that hands images to a writer thread needs a ring larger
+    than the number of frames in flight."""
+
+    def __init__(self, width, height, n_lights, packet, n_images=2):
         self.size = (width, height, n_lights, packet)
         self.camera = camera_buffers(width, height, packet)
         self.work = Workspace()
+        self.images = [None] * max(1, n_images)
+        self.next_image = 0
+
+    def image(self):
+        """The next (rgba (H*W, 4), z (H*W,)) f32 pair of the ring."""
+        k = self.next_image
+        self.next_image = (k + 1) % len(self.images)
+        if self.images[k] is None:
+            W, H = self.size[:2]
+            self.images[k] = (np.empty((H * W, 4), np.float32), np.empty(H * W, np.float32))
+        return self.images[k]
 
 
 def _light_is_dark(light) -> bool:
@@ -91,8 +108,9 @@ def _light_is_dark(light) -> bool:
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
                  buffers: FrameBuffers = None, scene_grid: SceneGrid = None) -> FrameResult:
     """Render one frame. Pass the same `buffers` and `scene_grid` for
-    consecutive frames to reuse work arrays and static geometry; the returned
-    images are always fresh arrays.
+    consecutive frames to reuse work arrays, image memory and static geometry;
+    the returned images then belong to the buffers' ring (see FrameBuffers),
+    else they are fresh arrays.
 
     Per pass of camera rays (one per sample offset): trace, gather the visible
     surface once (surface.py), trace each light's shadow rays in light-space
@@ -100,7 +118,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
-        buffers = FrameBuffers(W, H, n_lights, cfg.packet)
+        buffers = FrameBuffers(W, H, n_lights, cfg.packet, n_images=1)
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "shadow_rays_skipped": 0, "lights_skipped": 0,
                 "tri_tests": 0, "cells": 0, "fallback_rays": 0,
@@ -134,8 +152,10 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     offsets = sample_offsets(cfg.spp)
     single = len(offsets) == 1
     # one sample: the pass writes the image; several: each adds 1/spp of its own
-    rgba = np.empty((H * W, 4), np.float32) if single else np.zeros((H * W, 4), np.float32)
-    z = np.empty(H * W, np.float32) if single else np.full(H * W, np.inf, np.float32)
+    rgba, z = buffers.image()
+    if not single:
+        rgba.fill(0.0)
+        z.fill(np.inf)
     aov_n = aov_p = first_prim = None
     for pass_index, jitter in enumerate(offsets):
         t0 = time.perf_counter()

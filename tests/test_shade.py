@@ -131,3 +131,35 @@ def test_shaded_frame_matches_a_numpy_oracle():
     np.testing.assert_allclose(got[~bad], expected[~bad], rtol=2e-4, atol=2e-5)
     z = np.where(hit, hits.t * (d @ cam[3:6]), np.inf)
     np.testing.assert_allclose(result.z.reshape(-1), z, rtol=1e-6)
+
+
+def test_image_ring_keeps_a_frame_until_the_ring_comes_round():
+    """Frames rendered with shared FrameBuffers reuse image memory in a ring:
+    frame k's images stay as they were while frame k+1 renders, and a
+    multi-sample frame after a one-sample frame starts from cleared images."""
+    from conftest import icosphere_mesh
+    from raycore.config import RenderConfig
+    from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
+    from raycore.mesh import vertex_face_csr
+    v, f = icosphere_mesh(2, 1.0)
+    verts, faces = v.astype(np.float32), f.astype(np.int32)
+    vf = vertex_face_csr(faces, len(verts))
+    geom = Geometry(verts, faces, np.zeros(len(faces), np.int32), np.zeros((0, 2), np.float32), *vf)
+    shading = Shading(np.array([[0.8, 0.8, 0.8, 0, 1, -1, 0, 0]], np.float32), np.zeros(1, np.float32),
+                      np.zeros((0, 3), np.int64), np.array([[0, 2, 3, 4, 20, 20, 20, 0]], np.float32))
+    cfg = RenderConfig(width=48, height=40, packet=8)
+    poses = [CameraPose((0, 0, 4.0), (0, 0, 0), (0, 1, 0), 40.0),
+             CameraPose((1.5, 0.5, 3.0), (0, 0, 0), (0, 1, 0), 55.0)]
+    fresh = [render_frame(geom, shading, p, cfg) for p in poses]
+    buffers = FrameBuffers(cfg.width, cfg.height, 1, cfg.packet, n_images=2)
+    first = render_frame(geom, shading, poses[0], cfg, buffers)
+    second = render_frame(geom, shading, poses[1], cfg, buffers)
+    assert not np.shares_memory(first.rgba, second.rgba)
+    for got, want in ((first, fresh[0]), (second, fresh[1])):
+        np.testing.assert_array_equal(got.rgba, want.rgba)
+        np.testing.assert_array_equal(got.z, want.z)
+    third = render_frame(geom, shading, poses[1], cfg, buffers)      # the ring comes round
+    assert np.shares_memory(third.rgba, first.rgba)
+    cfg4 = RenderConfig(width=48, height=40, packet=8, spp=4)
+    multi = render_frame(geom, shading, poses[0], cfg4, buffers)
+    np.testing.assert_allclose(multi.rgba, render_frame(geom, shading, poses[0], cfg4).rgba, atol=1e-6)
