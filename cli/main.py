@@ -137,7 +137,12 @@ def _int_list(text, name, allowed=None):
               help="A PNG: stacked bars of median ms per phase (interp, build, trace, shade, shadow, "
                    "write) per scene; with --error, the error plot (default interp_error.png; the JSON "
                    "goes next to it unless --json is given).")
-def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_report, plot_path):
+@click.option("--peers", is_flag=True,
+              help="Also run the same frames through the ray casters of other Python packages that "
+                   "are installed (embreex, Open3D, Mitsuba 3: pip install 'frustrace[peers]'), "
+                   "rebuilt every frame, one shadow ray per hit and light; adds their rows and "
+                   "frustrace's fps_full over the best peer's.")
+def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_report, plot_path, peers):
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
@@ -163,7 +168,16 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     if not accels or any(a not in ("grid", "kdtree") for a in accels):
         raise click.BadParameter("comma-separated grid, kdtree", param_hint="--accel")
     n_threads = set_threads(threads)
-    rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", (4, 8, 16, 32)), n_threads, accels)
+    peer_list = []
+    if peers:
+        from .peers import PEER_NAMES, available_peers
+        peer_list = available_peers(n_threads)
+        if not peer_list:
+            raise click.UsageError(f"--peers: none of {', '.join(PEER_NAMES)} imports here; "
+                                   "pip install 'frustrace[peers]'")
+        click.echo(f"peers: {', '.join(p.name for p in peer_list)}", err=True)
+    rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", (4, 8, 16, 32)), n_threads, accels,
+                     peer_list)
     bench_table(rows)
     if plot_path:
         from .bench import plot_phases

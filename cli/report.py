@@ -39,10 +39,13 @@ def summary_table(stats):
 
 
 def bench_table(rows):
-    """One line per scene and packet size; the fastest fps_raycast per scene marked."""
+    """One line per scene and packet size (and peer); the fastest fps_raycast
+    per scene marked; with peers, frustrace's fps_full over the best peer's."""
     table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
+    with_peers = any("vs_best_peer" in r for r in rows)
     for col in ("scene", "accel", "tris", "res", "packet", "threads", "interp", "build", "trace", "shade",
-                "shadow", "write", "fps_raycast", "fps_full", "Mrays/s", "shadow Mrays/s", "tests/ray"):
+                "shadow", "write", "fps_raycast", "fps_full", "Mrays/s", "shadow Mrays/s", "tests/ray",
+                *(["full / best peer"] if with_peers else [])):
         table.add_column(col, justify="right")
     best = {}
     for r in rows:
@@ -50,16 +53,22 @@ def bench_table(rows):
             best[r["scene"]] = (r["fps_raycast"], (r["accel"], r["packet"]))
     for r in rows:
         mark = " *" if best[r["scene"]][1] == (r["accel"], r["packet"]) else ""
-        table.add_row(r["scene"], r["accel"], str(r["triangles"]), str(r["resolution"]), f"{r['packet']}{mark}",
+        peer = r.get("peer", False)
+        ratio = [f"{r['vs_best_peer']:.2f}x" if "vs_best_peer" in r else "-"] if with_peers else []
+        table.add_row(r["scene"], r["accel"], str(r["triangles"]), str(r["resolution"]),
+                      ("-" if peer else str(r["packet"])) + mark,
                       str(r["threads"]), f"{r['interp_ms']:.2f}", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
                       f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['write_ms']:.1f}",
                       f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",
                       f"{r['shadow_mrays_per_s']:.1f}",
-                      f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}")
+                      "-" if peer else f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}", *ratio)
     console = Console()
     if not console.is_terminal:
-        console = Console(width=190)      # a pipe or file gets the whole table
+        console = Console(width=210)      # a pipe or file gets the whole table
     console.print(table)
+    if any(r.get("peer") for r in rows):
+        console.print("peers: structure rebuilt every frame, one shadow ray per hit and light; no shading "
+                      "(shade 0) and rays made before the clock starts, both in their favour")
 
 
 def compare_table(result):

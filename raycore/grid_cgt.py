@@ -44,9 +44,12 @@ OX, OY, OZ, DX, DY, DZ, TMIN, TMAX = 0, 1, 2, 3, 4, 5, 6, 7
 # disjoint). DU and DV are read only by the shared-origin (camera, point light) walk.
 OU, OV, OK, SU, SV, SZ, DK, TEXIT, WTMIN, DU, DV = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10
 N_WORK = 11
-# rows of the `sub` array (8, n_sub + 1): frustum bounds of each sub-packet,
-# column n_sub holds the whole packet's
-UMIN, UMAX, GUMIN, GUMAX, VMIN, VMAX, GVMIN, GVMAX = 0, 1, 2, 3, 4, 5, 6, 7
+# rows of the `sub` array (N_SUB_ROWS, n_sub + 1): frustum bounds of each
+# sub-packet, column n_sub holds the whole packet's; WMIN/WMAX bound where
+# along K the sub-packet's rays live (rays with their own origins and ends:
+# shadow rays), so that triangles before or past all of them are skipped
+UMIN, UMAX, GUMIN, GUMAX, VMIN, VMAX, GVMIN, GVMAX, WMIN, WMAX = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+N_SUB_ROWS = 10
 MAILBOX_SIZE = 256            # power of two; collisions only cost a re-test
 # counters (per tile): 0 packets, 1 cells visited, 2 ray-triangle tests,
 # 3 triangle candidates after mailbox, 4 rays sent to the single-ray fallback
@@ -165,12 +168,16 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
     w_end = k_last - k_first           # farthest exit, in w
     n_live = 0
     for j in range(n_sub):
-        u0 = v0 = gu0 = gv0 = INF
-        u1 = v1 = gu1 = gv1 = -INF
+        u0 = v0 = gu0 = gv0 = w_lo = INF
+        u1 = v1 = gu1 = gv1 = w_hi = -INF
         live = 0
         for r in range(ss):
             on = work[TEXIT, j, r] >= work[WTMIN, j, r]
             live += 1 if on else 0
+            # a hit has t in (t_min, t_exit]: w is increasing in t
+            ok_r = work[OK, j, r]
+            w_lo = min(w_lo, (ok_r + work[WTMIN, j, r] * work[DK, j, r] - k_ref) * sf if on else INF)
+            w_hi = max(w_hi, (ok_r + work[TEXIT, j, r] * work[DK, j, r] - k_ref) * sf if on else -INF)
             dk_ref = k_ref - work[OK, j, r]
             u = work[OU, j, r] + dk_ref * work[SU, j, r]
             v = work[OV, j, r] + dk_ref * work[SV, j, r]
@@ -187,13 +194,16 @@ def setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps):
         sub_active[j] = live
         n_live += live
         set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps)
+        sub[WMIN, j] = w_lo - eps
+        sub[WMAX, j] = w_hi + eps
     packet_bounds(sub, sub_active)
     return K, s, n_live, k_ref, w_end
 
 
 @helper
 def set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps):
-    """Store the frustum bounds of sub-packet j, loosened by eps."""
+    """Store the frustum bounds of sub-packet j, loosened by eps (its depth
+    range WMIN/WMAX unbounded: the caller narrows it where it knows it)."""
     sub[UMIN, j] = u0 - eps
     sub[UMAX, j] = u1 + eps
     sub[GUMIN, j] = gu0
@@ -202,6 +212,8 @@ def set_bounds(sub, j, u0, u1, gu0, gu1, v0, v1, gv0, gv1, eps):
     sub[VMAX, j] = v1 + eps
     sub[GVMIN, j] = gv0
     sub[GVMAX, j] = gv1
+    sub[WMIN, j] = -INF
+    sub[WMAX, j] = INF
 
 
 @helper
@@ -375,13 +387,16 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
                             pnv = e1k * e2u - e1u * e2k
                             pnk = e1u * e2v - e1v * e2u
                             t_num = xu * pnu + xv * pnv + xk * pnk
-                        # cull against every sub-packet frustum in one branch-free
-                        # loop (vectorized over sub-packets: bounds are SoA)
+                        # cull against every sub-packet frustum and depth range in one
+                        # branch-free loop (vectorized over sub-packets: bounds are SoA)
+                        w_near = min(wa, wb, wc)
+                        w_far = max(wa, wb, wc)
                         for j in range(n_sub):
                             out = (_cull_plane(au, wa, bu, wb, cu, wc, sub[GUMIN, j], sub[UMIN, j], True)
                                    | _cull_plane(au, wa, bu, wb, cu, wc, sub[GUMAX, j], sub[UMAX, j], False)
                                    | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMIN, j], sub[VMIN, j], True)
-                                   | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False))
+                                   | _cull_plane(av, wa, bv, wb, cv, wc, sub[GVMAX, j], sub[VMAX, j], False)
+                                   | (w_far < sub[WMIN, j]) | (w_near > sub[WMAX, j]))
                             sub_skip[j] = (out & cull) | (sub_done[j] >= ss)
                         for j in range(n_sub):
                             if sub_skip[j]:

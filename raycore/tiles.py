@@ -14,7 +14,7 @@ from numba import prange
 
 from ._jit import fetch_add, helper, kernel, parallel_kernel
 from .camera import primary_dir
-from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_WORK, OK, OU, OV,
+from .grid_cgt import (DK, DX, DY, DZ, F0, F1, INF, MAILBOX_SIZE, N_SUB_ROWS, N_WORK, OK, OU, OV,
                        OX, OY, OZ, SU, SV, SZ, DU, DV, TEXIT, TMAX, TMIN, WTMIN, packet_bounds,
                        pick_axis, set_bounds, setup_rays, walk)
 from .grid_dda import dda_trace
@@ -69,14 +69,14 @@ def _ray_offsets(sub_size):
 @kernel
 def _scratch(packet, sub_size):
     """One thread's packet scratch: rays (8, n_sub, ss), work (N_WORK, n_sub,
-    ss), hit t/b1/b2/prim (n_sub, ss), sub bounds (8, n_sub + 1), sub-packet
+    ss), hit t/b1/b2/prim (n_sub, ss), sub bounds (N_SUB_ROWS, n_sub + 1), sub-packet
     live and done counts, mailbox."""
     ss = sub_size * sub_size
     n_sub = packet * packet // ss
     return (np.empty((8, n_sub, ss), np.float32), np.empty((N_WORK, n_sub, ss), np.float32),
             np.empty((n_sub, ss), np.float32), np.zeros((n_sub, ss), np.float32),
             np.zeros((n_sub, ss), np.float32), np.empty((n_sub, ss), np.int32),
-            np.empty((8, n_sub + 1), np.float32), np.empty(n_sub, np.int32),
+            np.empty((N_SUB_ROWS, n_sub + 1), np.float32), np.empty(n_sub, np.int32),
             np.empty(n_sub, np.int32), np.empty(n_sub, np.bool_), np.empty(MAILBOX_SIZE, np.int32))
 
 
