@@ -29,6 +29,25 @@ def _key_path(loc):
     return ".".join(str(p) for p in loc)
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """yaml.SafeLoader that rejects a mapping key given twice (plain YAML
+    keeps the last one silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            # the keys written here (merged '<<' keys may be overridden)
+            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=deep)
+            first = seen.setdefault(key, key_node)
+            if first is not key_node:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r} (first at line {first.start_mark.line + 1})",
+                    key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_scene_file(path) -> SceneFile:
     path = Path(path)
     try:
@@ -38,7 +57,7 @@ def read_scene_file(path) -> SceneFile:
     except OSError as exc:
         raise SceneError(path, "", f"cannot read: {exc.strerror}") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -141,12 +160,13 @@ class AnimatedScene:
         self.materials = [m.model_dump() for m in spec.materials.values()] + [DEFAULT_MATERIAL]
         self.texture_paths = []
         self.texture_spaces = []       # "auto" | "srgb" | "linear", one per texture
-        for m in self.materials:
+        self.texture_keys = []         # "materials.NAME.texture", for errors
+        for name, m in zip(self.material_names + ["(default)"], self.materials):
             if m["texture"]:
                 tex_path = self.path.parent / m["texture"]
                 if not tex_path.is_file():
-                    name = self.material_names[self.materials.index(m)]
                     raise SceneError(self.path, f"materials.{name}.texture", f"file not found: {tex_path}")
+                self.texture_keys.append(f"materials.{name}.texture")
                 m["texture_index"] = len(self.texture_paths)
                 self.texture_paths.append(tex_path)
                 self.texture_spaces.append(m["texture_space"])
@@ -157,6 +177,12 @@ class AnimatedScene:
         offset = 0
         faces, mats, uvs = [], [], []
         any_uv_needed = False
+        names = {}
+        for i, o in enumerate(spec.objects):
+            if o.name in names:
+                raise SceneError(self.path, f"objects.{i}.name",
+                                 f"{o.name!r} is also the name of objects.{names[o.name]}; names must be unique")
+            names[o.name] = i
         for i, o in enumerate(spec.objects):
             if o.material is not None and o.material not in spec.materials:
                 raise SceneError(self.path, f"objects.{i}.material", f"unknown material {o.material!r}")
@@ -195,6 +221,54 @@ class AnimatedScene:
             vec = np.array([[k.eye, k.look_at, k.up] for k in cam.keys])   # three points per key
             self._camera_curve = Curve(times, vec, cam.interpolation)
             self._fov_curve = Curve(times, np.array([k.fov for k in cam.keys]), "linear")
+        self.check_camera(self.frame_numbers)
+        if "#" not in spec.output.path and spec.frames.end > spec.frames.start:
+            raise SceneError(self.path, "output.path",
+                             f"{spec.output.path!r} needs a run of '#' for the frame number: "
+                             f"frames {spec.frames.start}..{spec.frames.end} would share one file")
+        if not spec.lights:
+            self.warnings.append("no lights: surfaces get the ambient term only")
+        self._warn_outside_keys()
+
+    def check_camera(self, frames):
+        """SceneError naming the key if the camera has no viewing direction
+        (eye = look_at), or its up vector is zero or parallel to it, at any of
+        these frames (every frame of an animated camera)."""
+        keyed = self._camera_curve is not None
+        for frame in (frames if keyed else frames[:1]):
+            eye, look_at, up, _ = (np.asarray(v, np.float64) for v in self.camera_at(self.time_of(frame)))
+            forward = look_at - eye
+            scale = max(np.abs(eye).max(), np.abs(look_at).max(), 1e-30)
+            where = f"at frame {frame} (t = {self.time_of(frame):g}): " if keyed else ""
+            if np.linalg.norm(forward) <= 1e-6 * scale:
+                raise SceneError(self.path, "camera.keys" if keyed else "camera.look_at",
+                                 f"{where}look_at equals eye: the camera looks nowhere")
+            side = np.linalg.norm(np.cross(forward / np.linalg.norm(forward), up))
+            if not side > 1e-6 * np.linalg.norm(up) or not np.linalg.norm(up) > 0:
+                raise SceneError(self.path, "camera.keys" if keyed else "camera.up",
+                                 f"{where}up {tuple(float(u) for u in up)} is zero or parallel to the "
+                                 "viewing direction (look_at - eye): the image has no 'up'")
+
+    def _warn_outside_keys(self):
+        """A warning for every keyed motion that the frame range runs past
+        (clamped: held still before the first key or after the last)."""
+        spec = self.spec
+        t0, t1 = self.time_of(spec.frames.start), self.time_of(spec.frames.end)
+        ranges = []
+        if spec.camera.keys:
+            ranges.append(("camera.keys", [k.t for k in spec.camera.keys], "clamp"))
+        for i, o in enumerate(spec.objects):
+            if o.keyframes:
+                ranges.append((f"objects.{i}.keyframes", [k.t for k in o.keyframes], o.extrapolate))
+            for name in ("translation", "rotation", "scale"):
+                track = getattr(o.transform, name, None) if o.transform else None
+                if track is not None and track.keys and len(track.keys) > 1:
+                    ranges.append((f"objects.{i}.transform.{name}", [r[0] for r in track.keys], o.extrapolate))
+        for key, times, extrapolate in ranges:
+            if len(times) > 1 and extrapolate == "clamp" and (t0 < min(times) or t1 > max(times)):
+                self.warnings.append(f"{key}: frames {spec.frames.start}..{spec.frames.end} run over "
+                                     f"t = {t0:g}..{t1:g}, keys only cover {min(times):g}..{max(times):g}: "
+                                     "held still outside")
 
     @property
     def moving_triangles(self):

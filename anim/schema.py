@@ -1,12 +1,16 @@
 """anim.yaml version 1 (../shared/SPEC.md section 2), validated by pydantic.
 
-Unknown keys are errors (`extra="forbid"`): a typo must not pass silently.
+Unknown keys are errors (`extra="forbid"`): a typo must not pass silently;
+so are inf and NaN anywhere (`allow_inf_nan=False`), a camera given both
+fixed values and keys, a zero light direction and an output path that is
+not one `.exr` name with at most one run of '#'.
 Extensions beyond the spec's example (all optional, backward compatible):
 `render.ambient`, `render.grid_density`, lights of `type: directional`,
 more interpolation methods (anim/interpolate.py), rotation tracks with
 `slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
 glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`.
 """
+import re
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -19,7 +23,7 @@ TrackInterp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural"
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class Frames(Strict):
@@ -41,6 +45,14 @@ class Output(Strict):
     # EXR codec (raycore/image_io.COMPRESSIONS); zip is lossless and measured fastest
     compression: Literal["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa",
                          "dwab", "zstd", "htj2k256", "htj2k32"] = "zip"
+
+    @model_validator(mode="after")
+    def _exr_pattern(self):
+        if not self.path.lower().endswith(".exr"):
+            raise ValueError(f"path {self.path!r}: frames are OpenEXR files, the name must end in .exr")
+        if len(re.findall(r"#+", self.path)) > 1:
+            raise ValueError(f"path {self.path!r}: only one run of '#' (the frame number) is allowed")
+        return self
 
 
 class CameraKey(Strict):
@@ -65,6 +77,10 @@ class Camera(Strict):
             raise ValueError("needs either eye and look_at, or keys")
         if self.keys is not None and len(self.keys) == 0:
             raise ValueError("keys is empty")
+        fixed = sorted(self.model_fields_set & {"eye", "look_at", "up", "fov"})
+        if self.keys is not None and fixed:
+            raise ValueError(f"has both keys and {', '.join(fixed)}: with keys, every key carries "
+                             "its own eye, look_at, up and fov; remove the fixed ones")
         return self
 
 
@@ -91,6 +107,8 @@ class Light(Strict):
             raise ValueError("a point light needs a position")
         if self.type == "directional" and self.direction is None:
             raise ValueError("a directional light needs a direction")
+        if self.type == "directional" and not any(self.direction):
+            raise ValueError("direction [0, 0, 0] points nowhere")
         return self
 
 

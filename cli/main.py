@@ -93,6 +93,7 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     scene = load_scene(anim_yaml)
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
+    scene.check_camera(frames)                 # frames outside the file's range too
     n_threads = set_threads(threads)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     shadows=spec.render.shadows and not no_shadows, accel=accel)
@@ -266,20 +267,30 @@ def assets_make(name, out_dir, preview_path):
 @main.command()
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
 def check(anim_yaml):
-    """Validate ANIM_YAML (schema, meshes, keys) and summarise it; render nothing."""
+    """Validate ANIM_YAML (schema, meshes, keys, camera at every frame,
+    textures) and summarise it; render nothing. What passes here, `render`
+    accepts."""
+    from .pipeline import shading_of
     scene = load_scene(anim_yaml)
+    shading_of(scene)                       # reads every texture, as render does
     spec = scene.spec
     moving = sum(1 for o in scene.objects if not o.static)
     click.echo(f"{anim_yaml}: ok")
     click.echo(f"  frames {spec.frames.start}..{spec.frames.end} at {spec.frames.fps:g} fps, "
                f"{spec.output.resolution[0]}x{spec.output.resolution[1]}, spp {spec.render.spp}")
-    click.echo(f"  {len(scene.objects)} objects ({moving} moving), {scene.faces.shape[0]} triangles, "
-               f"{scene.n_vertices} vertices")
-    click.echo(f"  {len(spec.lights)} lights, {len(scene.materials) - 1} materials, "
-               f"{len(scene.texture_paths)} textures, camera {'animated' if spec.camera.keys else 'static'}")
+    click.echo(f"  {_count(len(scene.objects), 'object')} ({moving} moving), "
+               f"{_count(scene.faces.shape[0], 'triangle')}, {_count(scene.n_vertices, 'vertex', 'vertices')}")
+    click.echo(f"  {_count(len(spec.lights), 'light')}, {_count(len(scene.materials) - 1, 'material')}, "
+               f"{_count(len(scene.texture_paths), 'texture')}, "
+               f"camera {'animated' if spec.camera.keys else 'static'}")
     for o in scene.objects:
         kind = "static" if o.static else ("rigid" if o.rigid else "deforming")
-        click.echo(f"    {o.name}: {len(o.faces)} triangles, {kind}")
+        click.echo(f"    {o.name}: {_count(len(o.faces), 'triangle')}, {kind}")
+
+
+def _count(n, one, many=None):
+    """'1 light', '2 lights'."""
+    return f"{n} {one if n == 1 else (many or one + 's')}"
 
 
 if __name__ == "__main__":

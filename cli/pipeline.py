@@ -30,13 +30,15 @@ MAX_PENDING_WRITES = 0
 
 
 def frame_path(pattern: str, frame: int) -> str:
-    """Replace the run of '#' with the zero-padded frame number."""
+    """Replace the run of '#' (the schema allows one) with the frame number,
+    zero-padded to the run's width; a negative frame gets its sign in front
+    of the padded digits (frame -1 in f_###.exr: f_-001.exr)."""
     runs = re.findall(r"#+", pattern)
     if not runs:
         return pattern
     width = len(runs[-1])
     head, _, tail = pattern.rpartition(runs[-1])
-    return f"{head}{frame:0{width}d}{tail}"
+    return f"{head}{'-' if frame < 0 else ''}{abs(frame):0{width}d}{tail}"
 
 
 def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
@@ -54,11 +56,11 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
 def shading_of(scene: AnimatedScene) -> Shading:
     """Materials, lights and textures as flat arrays; textures loaded once."""
     texels, info, offset = [], [], 0
-    for path, space in zip(scene.texture_paths, scene.texture_spaces):
+    for path, space, key in zip(scene.texture_paths, scene.texture_spaces, scene.texture_keys):
         try:
             img = read_texture(path, space)
         except OSError as exc:
-            raise SceneError(scene.path, "materials", f"cannot read texture: {exc}") from None
+            raise SceneError(scene.path, key, f"cannot read texture: {exc}") from None
         h, w = img.shape[:2]
         texels.append(img.reshape(-1))
         info.append((offset, w, h))

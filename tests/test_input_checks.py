@@ -1,0 +1,105 @@
+"""Mistakes in a scene file that used to pass silently, or pass `check` and
+then fail `render`: each is exit 2 with one line naming the key, from `check`
+and `render` alike, or a warning where the scene is still meaningful."""
+import pytest
+from click.testing import CliRunner
+
+from cli.main import main
+from cli.pipeline import frame_path
+from test_scene import scene_with
+
+BALL = "  - {name: ball, mesh: ball.obj}\n"
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def assert_rejected(path, key, words, tmp_path):
+    """check and render both exit 2 with one line naming the key; no frame written."""
+    for args in (["check", path], ["render", path, "-o", tmp_path / "out", "-q"]):
+        res = run(*args)
+        assert res.exit_code == 2, (args[0], res.output)
+        lines = res.output.strip().splitlines()
+        assert len(lines) == 1 and key in lines[0] and all(w in lines[0] for w in words), res.output
+    assert not list((tmp_path / "out").glob("*.exr")) if (tmp_path / "out").exists() else True
+
+
+@pytest.mark.parametrize("camera, key, words", [
+    ("camera: {eye: [1, 2, 3], look_at: [1, 2, 3]}", "camera.look_at", ["equals eye"]),
+    ("camera: {eye: [0, 5, 0], look_at: [0, 0, 0], up: [0, 1, 0]}", "camera.up", ["parallel"]),
+    ("camera: {eye: [0, 1, 6], look_at: [0, 0, 0], up: [0, 0, 0]}", "camera.up", ["zero"]),
+    # animated: degenerate only between the keys (frame 1 of 0..3, t = 0.5)
+    ("camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0, 0]}, {t: 1, eye: [0, 1, -6], look_at: [0, 0, 0]}],"
+     " interpolation: linear}", "camera.keys", ["frame 1", "parallel"]),
+    ("camera: {eye: [0, 1, 6], look_at: [0, 0, 0], keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0, 0]}]}",
+     "camera", ["both keys and eye, look_at"]),
+])
+def test_degenerate_and_contradictory_cameras(tmp_path, camera, key, words):
+    assert_rejected(scene_with(tmp_path, BALL, camera_yaml=camera), key, words, tmp_path)
+
+
+def test_render_checks_the_camera_at_frames_outside_the_files_range(tmp_path):
+    camera = ("camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0, 0]}, {t: 1.5, eye: [0, 1, 6], look_at: [0, 0, 0]},"
+              " {t: 3, eye: [0, 6, 0.0], look_at: [0, 0, 0]}], interpolation: linear}")
+    path = scene_with(tmp_path, BALL, camera_yaml=camera)     # frames 0..3 at 2 fps: t <= 1.5
+    assert run("check", path).exit_code == 0
+    res = run("render", path, "-o", tmp_path / "out", "--frames", "5:6", "-q")
+    assert res.exit_code == 2 and "frame 6" in res.output and "camera.keys" in res.output
+
+
+def test_duplicate_object_names(tmp_path):
+    assert_rejected(scene_with(tmp_path, BALL + BALL), "objects.1.name", ["'ball'", "objects.0"], tmp_path)
+
+
+def test_duplicate_yaml_keys_are_named_with_their_lines(tmp_path):
+    path = scene_with(tmp_path, BALL)
+    path.write_text(path.read_text().replace("version: 1\n", "version: 1\nversion: 1\n"))
+    res = run("check", path)
+    assert res.exit_code == 2 and "duplicate key 'version'" in res.output and "line 1" in res.output
+
+
+@pytest.mark.parametrize("lights, key, words", [
+    ("lights: [{type: directional, direction: [0, 0, 0]}]", "lights.0", ["points nowhere"]),
+    ("lights: [{type: point, position: [0, .inf, 0]}]", "lights.0.position", ["finite"]),
+    ("lights: [{type: point, position: [0, 3, 0], intensity: .nan}]", "lights.0.intensity", ["finite"]),
+])
+def test_lights_that_point_nowhere_or_sit_at_infinity(tmp_path, lights, key, words):
+    path = scene_with(tmp_path, BALL)
+    text = path.read_text().replace("lights: [{type: point, position: [3, 5, 4], intensity: 30}]", lights)
+    path.write_text(text)
+    assert_rejected(path, key, words, tmp_path)
+
+
+@pytest.mark.parametrize("output, words", [
+    ("out/f_##.png", [".exr"]),
+    ("out/f_##_v##.exr", ["one run of '#'"]),
+    ("out/still.exr", ["needs a run of '#'"]),           # frames 0..3 would share one file
+])
+def test_output_paths_that_render_would_reject_or_get_wrong(tmp_path, output, words):
+    path = scene_with(tmp_path, BALL)
+    path.write_text(path.read_text().replace("path: out/f_##.exr", f"path: {output}"))
+    assert_rejected(path, "output", words, tmp_path)
+
+
+def test_a_texture_that_is_not_an_image_fails_check_too(tmp_path):
+    path = scene_with(tmp_path, "  - {name: ball, mesh: ball.obj, material: m}\n",
+                      extra="materials: {m: {texture: notes.png}}")
+    (tmp_path / "notes.png").write_text("not an image")
+    assert_rejected(path, "materials.m.texture", ["cannot read texture"], tmp_path)
+
+
+def test_warnings_for_no_lights_and_frames_past_the_keys(tmp_path):
+    camera = "camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0, 0]}, {t: 1, eye: [1, 1, 6], look_at: [0, 0, 0]}]}"
+    path = scene_with(tmp_path, BALL, camera_yaml=camera)    # frames 0..3 at 2 fps: t up to 1.5
+    path.write_text(path.read_text().replace("lights: [{type: point, position: [3, 5, 4], intensity: 30}]", "lights: []"))
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 0, res.output
+    assert "no lights" in res.stderr and "camera.keys" in res.stderr and "0..1" in res.stderr
+    assert "0 lights, 0 materials, 0 textures" in res.stdout and "1 object " in res.stdout
+
+
+def test_negative_frame_numbers_keep_their_padding():
+    assert frame_path("f_###.exr", -1) == "f_-001.exr"
+    assert frame_path("f_###.exr", 7) == "f_007.exr"
+    assert frame_path("f_#.exr", -12) == "f_-12.exr"
