@@ -1,4 +1,10 @@
-"""The one trimesh module: load a mesh file without merging or reordering."""
+"""The one trimesh module: load a mesh file without merging or reordering.
+
+STL is the exception: it stores every triangle's three corners apart, so
+nothing is shared and vertex normals would be the facets' own (a faceted
+look). Its exactly coincident corners are merged, in order of first
+appearance, so that keyframes of one STL animation stay in correspondence.
+"""
 import numpy as np
 import trimesh
 
@@ -23,9 +29,21 @@ def load_mesh(path, scene_file, key):
         raise SceneError(scene_file, key, f"mesh {path} has no triangles")
     if not np.all(np.isfinite(vertices)):
         raise SceneError(scene_file, key, f"mesh {path} has non-finite vertex coordinates")
+    if str(path).lower().endswith(".stl"):
+        vertices, faces = merge_coincident(vertices, faces)
     uvs = getattr(loaded.visual, "uv", None)
     if uvs is not None and len(uvs) == len(vertices):
         uvs = np.ascontiguousarray(uvs, np.float32)
     else:
         uvs = None
     return vertices, faces, uvs
+
+
+def merge_coincident(vertices, faces):
+    """Vertices with identical coordinates made one, kept in order of first
+    appearance; faces re-indexed."""
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return (np.ascontiguousarray(vertices[np.sort(first)]),
+            np.ascontiguousarray(rank[inverse.reshape(-1)][faces], np.int32))

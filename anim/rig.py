@@ -7,6 +7,7 @@ sum_k w_k G_j (v - o_j); the per-joint matrices are composed in float64.
 All joints' tracks are evaluated and composed by numba kernels in one pass
 (anim/track_kernels.py); only rotation splines go through scipy.
 """
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -67,14 +68,21 @@ def _pose(kind, euler, axes, intrinsic, quat, matrix, trans, origin, parent, out
 
 def load_weights(path, n_vertices, n_joints, scene_path, key, warnings):
     """(joint (n, k) int32, weight (n, k) float32, rows summing to 1) from .npz."""
+    if not Path(path).is_file():
+        raise SceneError(scene_path, key, f"weights file not found: {path}")
+    if not zipfile.is_zipfile(path):
+        raise SceneError(scene_path, key, f"{path} is not an .npz archive (numpy.savez) with arrays "
+                                          "'joints' and 'weights'")
     try:
-        with np.load(path) as data:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [name for name in ("joints", "weights") if name not in data.files]
+            if missing:
+                raise SceneError(scene_path, key, f"{path} has no array {' or '.join(map(repr, missing))} "
+                                                  f"(it has: {', '.join(data.files) or 'none'})")
             joint = np.asarray(data["joints"])
             weight = np.asarray(data["weights"], np.float64)
-    except FileNotFoundError:
-        raise SceneError(scene_path, key, f"weights file not found: {path}") from None
-    except KeyError as exc:
-        raise SceneError(scene_path, key, f"{path} lacks the array {exc}; expected 'joints' and 'weights'") from None
+    except SceneError:
+        raise
     except Exception as exc:
         raise SceneError(scene_path, key, f"cannot read weights {path}: {exc}") from None
     if joint.ndim == 1:

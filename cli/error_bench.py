@@ -8,13 +8,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from rich.console import Console
 from rich.table import Table
 
+from anim import builtin
 from anim.error_report import bounce_overshoot, measure
 from anim.scene import AnimatedScene
-from anim import builtin
+
+from .report import Console
 
 FPS = 24.0     # frames per second used to amortise fitting over a period
 MAX_VERTICES = 8192   # the method study runs on at most this many moving vertices (evenly subsampled)

@@ -4,7 +4,9 @@ Exit codes: 0 success, 2 bad input (one line naming file, key and problem),
 1 internal error.
 """
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import click
@@ -12,10 +14,55 @@ import click
 from anim.errors import SceneError
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that a render ends as on Ctrl-C."""
+
+
+class StopRequest:
+    """Signal handler for Ctrl-C and SIGTERM during a render: the first one
+    is noted and the render loop stops between frames (the frame being
+    written is finished); a second one stops at once. An exception raised
+    from a handler inside a numba call arrives wrapped in a SystemError,
+    so the first one is not raised there."""
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self, signum, frame):
+        if self.signum is not None:
+            raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+        self.signum = signum
+
+    def pending(self):
+        """The exception to end the render with, or None."""
+        if self.signum is None:
+            return None
+        return Terminated() if self.signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _interrupt_in(exc):
+    """The KeyboardInterrupt behind exc (itself, or the cause of a SystemError
+    from a signal that arrived inside a numba call), else None."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 class Group(click.Group):
-    """Turns SceneError into one line on stderr and exit code 2."""
+    """Turns SceneError into one line on stderr and exit code 2; Ctrl-C into
+    exit 130 and SIGTERM into 143 after the render loop has cleaned up; an
+    I/O fault writing a frame into one line and exit 1."""
 
     def invoke(self, ctx):
+        from cli.pipeline import FrameWriteError
+        main_thread = threading.current_thread() is threading.main_thread()
+        before = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
             return super().invoke(ctx)
         except SceneError as exc:
@@ -23,15 +70,37 @@ class Group(click.Group):
             sys.exit(2)
         except (click.exceptions.Exit, click.ClickException, click.Abort, SystemExit):
             raise
-        except KeyboardInterrupt:
-            click.echo("frustrace: interrupted; finished frames are complete, none is half-written", err=True)
-            sys.exit(130)
-        except Exception as exc:                      # internal error: exit 1
-            if os.environ.get("FRUSTRACE_DEBUG"):
-                raise
-            click.echo(f"frustrace: internal error: {type(exc).__name__}: {exc} "
-                       "(set FRUSTRACE_DEBUG=1 for a traceback)", err=True)
+        except (KeyboardInterrupt, SystemError) as caught:
+            exc = _interrupt_in(caught)
+            if exc is None:
+                return self._internal_error(caught)
+            what = "terminated" if isinstance(exc, Terminated) else "interrupted"
+            if ctx.invoked_subcommand == "render":
+                what += ("; every frame written is complete and listed in stats.json, "
+                         "none is half-written (--resume renders the rest)")
+            click.echo(f"frustrace: {what}", err=True)
+            sys.exit(143 if isinstance(exc, Terminated) else 130)
+        except FrameWriteError as exc:
+            click.echo(f"frustrace: error: {exc}; the frames before it are complete", err=True)
             sys.exit(1)
+        except BrokenPipeError:
+            # the reader of our output went away (`render ... | head -1`): the work
+            # is done, only its report was cut short; keep Python from failing on exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            sys.exit(0)
+        except Exception as exc:                      # internal error: exit 1
+            self._internal_error(exc)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGTERM, before)
+
+    @staticmethod
+    def _internal_error(exc):
+        if os.environ.get("FRUSTRACE_DEBUG"):
+            raise exc
+        click.echo(f"frustrace: internal error: {type(exc).__name__}: {exc} "
+                   "(set FRUSTRACE_DEBUG=1 for a traceback)", err=True)
+        sys.exit(1)
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
@@ -51,6 +120,20 @@ def load_scene(path):
     for message in scene.warnings:
         click.echo(f"frustrace: warning: {message}", err=True)
     return scene
+
+
+def _resolution(text):
+    """'320x240' -> (320, 240); None stays None."""
+    if text is None:
+        return None
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = None
+    if not sep or size is None or not all(0 < v <= 16384 for v in size):
+        raise click.BadParameter(f"expected WxH with 1..16384 each, got {text!r}", param_hint="--res")
+    return size
 
 
 def parse_frames(text, scene):
@@ -81,8 +164,11 @@ def parse_frames(text, scene):
 @click.option("--resume", is_flag=True, help="Skip frames whose file already exists.")
 @click.option("--overwrite", is_flag=True, help="Replace frames that already exist.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary table.")
+@click.option("--res", callback=lambda ctx, param, v: _resolution(v), metavar="WxH",
+              help="Render at W x H instead of output.resolution (a quick preview; the camera's "
+                   "field of view is kept vertically).")
 def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, stats_path,
-           resume, overwrite, quiet):
+           resume, overwrite, quiet, res):
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
@@ -95,17 +181,30 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too
     n_threads = set_threads(threads)
+    width, height = res if res else (None, None)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
-                    shadows=spec.render.shadows and not no_shadows, accel=accel)
+                    shadows=spec.render.shadows and not no_shadows, accel=accel, width=width, height=height)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"
     job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite)
     show = not quiet and sys.stderr.isatty()
-    with progress(len(frames), show) as on_frame:
-        stats = render_animation(job, on_frame)
+    stop = StopRequest()
+    before = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with progress(len(frames), show) as on_frame:
+            stats = render_animation(job, on_frame, warn=lambda m: click.echo(f"frustrace: warning: {m}", err=True),
+                                     should_stop=stop.pending)
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
     if not quiet:
+        if stats["runs"][-1]["frames_rendered"] == 0:
+            click.echo(f"nothing to render: all {len(frames)} frames exist and are whole")
         summary_table(stats)
+
+
+PLOT_FORMATS = (".png", ".pdf", ".svg")
 
 
 def _int_list(text, name, allowed=None):
@@ -150,18 +249,23 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     from raycore._jit import set_threads
     from .bench import SCENE_NAMES, run_bench
     from .report import bench_table
+    from .paths import writable_file
     names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
     unknown = [n for n in names if n not in SCENE_NAMES]
     if unknown:
         raise click.BadParameter(f"unknown scene {unknown[0]!r}; built-in: {', '.join(SCENE_NAMES)}", param_hint="--scene")
+    if json_path:
+        writable_file(json_path, "the --json file")
+    if plot_path:
+        writable_file(plot_path, "the --plot image", PLOT_FORMATS)
     if error_report:
         from .error_bench import print_report, run_error_report, write_report
+        plot_path = writable_file(plot_path or Path("interp_error.png"), "the --plot image", PLOT_FORMATS)
+        json_path = writable_file(json_path or plot_path.with_suffix(".json"), "the --json file")
         report = run_error_report(names)
         if not report["scenes"]:
             raise click.BadParameter("none of these scenes knows its exact motion", param_hint="--scene")
         print_report(report)
-        plot_path = plot_path or Path("interp_error.png")
-        json_path = json_path or plot_path.with_suffix(".json")
         write_report(report, plot_path, json_path)
         click.echo(f"wrote {plot_path} and {json_path}")
         return
@@ -185,7 +289,6 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
         plot_phases(rows, plot_path)
         click.echo(f"wrote {plot_path}")
     if json_path:
-        json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(rows, indent=1))
 
 
@@ -207,7 +310,10 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
     from raycore._jit import set_threads
     from .bench import scene_file
     from .compare import compare as run_compare, parse_structures
+    from .paths import writable_file
     from .report import compare_table
+    if json_path:
+        writable_file(json_path, "the --json file")
     try:
         names, path = parse_structures(structures)
     except ValueError as exc:
@@ -225,7 +331,6 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
     result["threads"] = n_threads
     compare_table(result)
     if json_path:
-        json_path.parent.mkdir(parents=True, exist_ok=True)
         json_path.write_text(json.dumps(result, indent=1))
 
 
@@ -249,15 +354,25 @@ def assets_list():
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Where to write anim.yaml and its files (default: ./NAME).")
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Also render the middle frame at 320x320 to this PNG.")
-def assets_make(name, out_dir, preview_path):
+              help="Also render the middle frame at 320x320 to this image (.png, .jpg, .tif, .exr, ...).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing anim.yaml and the files it names.")
+def assets_make(name, out_dir, preview_path, overwrite):
     """Generate built-in scene NAME (meshes, weights, textures, anim.yaml); deterministic."""
     from anim import builtin
+    from anim.errors import SceneError
     from .assets import make, render_preview
+    from .paths import PREVIEW_FORMATS, writable_dir, writable_file
     if name not in builtin.SCENES:
         raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.SCENES)}",
                                  param_hint="NAME")
-    path, seconds = make(name, out_dir or Path(name))
+    out_dir = out_dir or Path(name)
+    if (out_dir / "anim.yaml").exists() and not overwrite:
+        raise SceneError(out_dir / "anim.yaml", "", "exists (perhaps edited); use --overwrite to replace "
+                                                    "the scene and its files")
+    writable_dir(out_dir, "the scene")
+    if preview_path:
+        writable_file(preview_path, "the --preview image", PREVIEW_FORMATS)
+    path, seconds = make(name, out_dir)
     click.echo(f"wrote {path} ({seconds:.1f} s)")
     if preview_path:
         render_preview(path, preview_path)

@@ -8,7 +8,9 @@ by 2-50x, which costs more than the overlap gains. Raise the constant on
 machines with cores to spare. Compile time is measured apart by a small
 warm-up render and never mixed into fps.
 """
+import fcntl
 import json
+import os
 import re
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -24,6 +26,9 @@ from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_fr
 from raycore.image_io import read_texture, write_exr
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
+
+from .output_dir import claim, release, remove_stale_temps, whole_frame
+from .paths import writable_dir, writable_file
 
 VERSION = "0.1.0"
 MAX_PENDING_WRITES = 0
@@ -80,23 +85,40 @@ class RenderJob(NamedTuple):
     overwrite: bool
 
 
-def plan_frames(scene, out_dir, frames, resume, overwrite):
-    """(frame, path) pairs to render. Finished frames are skipped with --resume;
-    without --resume or --overwrite an existing frame is an error."""
+def frame_channels(cfg: RenderConfig) -> list:
+    """The EXR channels a frame of this render has (SPEC section 4)."""
+    extra = {"N": ["N.X", "N.Y", "N.Z"], "P": ["P.X", "P.Y", "P.Z"], "id": ["id"]}
+    return ["R", "G", "B", "A", "Z"] + [c for a in cfg.aovs for c in extra[a]]
+
+
+def frame_file(scene, out_dir, frame) -> Path:
+    """Where frame `frame` goes: output.path's name in out_dir, or
+    output.path itself, relative to the scene file."""
+    path = Path(frame_path(scene.spec.output.path, frame))
+    if out_dir is not None:
+        return out_dir / path.name
+    return path if path.is_absolute() else scene.path.parent / path
+
+
+def plan_frames(scene, out_dir, frames, resume, overwrite, cfg=None, warn=None):
+    """(frame, path) pairs to render. With --resume, a frame is skipped only
+    if its file is a whole frame of this render (cfg's size and channels):
+    a truncated or foreign file is rendered again, said through `warn`.
+    Without --resume or --overwrite an existing frame is an error."""
     todo = []
     pattern = scene.spec.output.path
     if "#" not in pattern and len(frames) > 1:
         raise SceneError(scene.path, "output.path", "needs a run of '#' for the frame number when rendering several frames")
     for f in frames:
-        path = Path(frame_path(pattern, f))
-        if out_dir is not None:
-            path = out_dir / path.name
-        elif not path.is_absolute():
-            path = scene.path.parent / path
+        path = frame_file(scene, out_dir, f)
         if path.exists() and not overwrite:
-            if resume:
+            if not resume:
+                raise SceneError(path, "", "frame exists; use --resume to skip finished frames or --overwrite to replace them")
+            problem = whole_frame(path, cfg.width, cfg.height, frame_channels(cfg)) if cfg else ""
+            if not problem:
                 continue
-            raise SceneError(path, "", "frame exists; use --resume to skip finished frames or --overwrite to replace them")
+            if warn:
+                warn(f"{path}: {problem}; rendering frame {f} again")
         todo.append((f, path))
     return todo
 
@@ -134,16 +156,32 @@ def warm_up(scene, shading, cfg, t) -> float:
     return time.perf_counter() - t0
 
 
-def render_animation(job: RenderJob, on_frame=None) -> dict:
+class FrameWriteError(OSError):
+    """A frame could not be written (disk full, directory gone, I/O error)."""
+
+
+def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None) -> dict:
+    """Render the job's frames; returns the stats (also written to
+    job.stats_path, merged by frame number with an earlier run's when
+    resuming). Whatever ends the run (the last frame, Ctrl-C, SIGTERM, a
+    failed write), the frames written so far are in stats.json, no frame is
+    left half-written, and no claim or temporary file of this run remains.
+    should_stop() is asked before every frame: an exception it returns ends
+    the run there (Ctrl-C and SIGTERM, noted by the command line)."""
     scene, cfg = job.scene, job.cfg
+    warn = warn or (lambda message: None)
     shading = shading_of(scene)
-    todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite)
-    for _, path in todo:
-        path.parent.mkdir(parents=True, exist_ok=True)
+    todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn)
+    stale = {path for _, path in todo if path.exists()}     # to be rendered again (not whole)
+    for directory in sorted({path.parent for _, path in todo}):
+        writable_dir(directory, "frames")
+        for name in remove_stale_temps(directory):
+            warn(f"removed {directory / name}, left by a render that was killed")
+    writable_file(job.stats_path, "stats.json")
     first_t = scene.time_of(todo[0][0] if todo else scene.frame_numbers[0])
-    compile_s = warm_up(scene, shading, cfg, first_t)
-    renderer = SceneRenderer(scene, cfg, shading)
-    rows = []
+    compile_s = warm_up(scene, shading, cfg, first_t) if todo else 0.0
+    renderer = SceneRenderer(scene, cfg, shading) if todo else None
+    rows, claimed = [], []
 
     def write(path, result, row):
         t0 = time.perf_counter()
@@ -152,46 +190,162 @@ def render_animation(job: RenderJob, on_frame=None) -> dict:
                 "Software": f"frustrace {VERSION}"}
         for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
             meta[f"frustrace:{k}"] = float(row[k])
-        write_exr(str(path), channels, meta, scene.spec.output.compression)
+        # the whole row: a frame written by a run that was then killed still
+        # gets its line in stats.json (recovered_row) when a later run ends
+        meta["frustrace:stats"] = json.dumps(row)
+        try:
+            write_exr(str(path), channels, meta, scene.spec.output.compression)
+        except OSError as exc:
+            raise FrameWriteError(f"cannot write frame {row['frame']} to {path}: "
+                                  f"{exc.strerror or exc}") from None
         row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
+        rows.append(row)                                      # in stats only once on disk
+        release(path)
 
     wall0 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=1) as writer:
-        pending = []
-        for frame, path in todo:
-            while len(pending) > MAX_PENDING_WRITES:
-                pending.pop(0).result()
-            t = scene.time_of(frame)
-            # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
-            # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
-            # writer thread never sees its images overwritten
-            interp_ms, result = renderer.render(t)
-            tm = result.timings
-            rays = result.counters["rays"]
-            row = {"frame": frame, "time": t, "triangles": int(scene.faces.shape[0]), "rays": rays,
-                   "interp_ms": interp_ms, **tm, "write_ms": 0.0,
-                   "tri_tests": float(result.counters["tri_tests"]),
-                   "shadow_rays": result.counters["shadow_rays"],
-                   "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
-                   "fallback_rays": result.counters["fallback_rays"],
-                   **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
-                      else {"kd_nodes": result.counters["kd_nodes"]}),
-                   "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
-            rows.append(row)
-            pending.append(writer.submit(write, path, result, row))
-            if on_frame:
-                on_frame(row)
-        for p in pending:
-            p.result()
-    wall_s = time.perf_counter() - wall0
-    stats = {"scene": scene.path.name, "resolution": [cfg.width, cfg.height], "accel": cfg.accel,
-             "packet": cfg.packet, "threads": cfg.threads, "frames": rows,
-             "summary": summarize(rows, wall_s, compile_s)}
-    job.stats_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = job.stats_path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(stats, indent=1))
-    tmp.replace(job.stats_path)
+    ended = "complete"
+    try:
+        with ThreadPoolExecutor(max_workers=1) as writer:
+            pending = []
+            for frame, path in todo:
+                while len(pending) > MAX_PENDING_WRITES:
+                    pending.pop(0).result()
+                stop = should_stop() if should_stop else None
+                if stop is not None:
+                    raise stop
+                if not claim(path):          # another render (--resume, same directory) has it
+                    continue
+                if job.resume and path.exists() and path not in stale:
+                    release(path)            # finished by another render since we planned
+                    continue
+                claimed.append(path)
+                t = scene.time_of(frame)
+                # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
+                # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
+                # writer thread never sees its images overwritten
+                interp_ms, result = renderer.render(t)
+                row = frame_row(scene, frame, t, interp_ms, result)
+                pending.append(writer.submit(write, path, result, row))
+                if on_frame:
+                    on_frame(row)
+            for p in pending:
+                p.result()
+    except BaseException as exc:
+        ended = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"failed: {exc}"
+        raise
+    finally:
+        for path in claimed:
+            release(path)
+        wall_s = time.perf_counter() - wall0
+        run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(time.time() - wall_s)),
+               "frames_rendered": len(rows), "wall_s": wall_s, "compile_s": compile_s, "ended": ended,
+               **settings_of(cfg)}
+        try:
+            stats = write_stats(job.stats_path, scene, cfg, rows, run,
+                                lambda f: frame_file(scene, job.out_dir, f), job.frames)
+        except OSError as exc:
+            message = f"cannot write {job.stats_path}: {exc.strerror or exc}"
+            if ended == "complete":
+                raise FrameWriteError(message) from None
+            warn(message)                # the fault that ended the run is the one to report
     return stats
+
+
+def write_stats(path: Path, scene, cfg, rows, run, file_of, frames) -> dict:
+    """Merge this run into stats.json under a lock on its directory (two
+    renders sharing a directory each add their frames): the earlier runs'
+    frames whose files still exist, this run's, and the job's frames on disk
+    that no stats.json lists (written by a run that was killed), recovered
+    from their EXR headers. Written atomically."""
+    fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        previous = read_stats(path) or {"frames": [], "runs": []}
+        previous["frames"] = [r for r in previous["frames"] if file_of(r["frame"]).exists()]
+        listed = {r["frame"] for r in previous["frames"]} | {r["frame"] for r in rows}
+        for f in frames:
+            if f not in listed and file_of(f).exists():
+                row = recovered_row(file_of(f))
+                if row is not None:
+                    previous["frames"].append(row)
+        stats = merged_stats(previous, scene, cfg, rows, run)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(stats, indent=1))
+        tmp.replace(path)
+    finally:
+        os.close(fd)                   # releases the lock
+    return stats
+
+
+def recovered_row(path: Path):
+    """The stats row a frame carries in its header (frustrace:stats), marked
+    recovered (its write_ms is unknown: 0); None for a file without one."""
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return None
+    try:
+        row = json.loads(inp.spec().getattribute("frustrace:stats") or "null")
+    except ValueError:
+        row = None
+    finally:
+        inp.close()
+    if not isinstance(row, dict) or not all(isinstance(row.get(k), (int, float)) for k in PHASE_KEYS):
+        return None
+    return {**row, "recovered": True}
+
+
+def frame_row(scene, frame, t, interp_ms, result) -> dict:
+    """The stats.json entry of one rendered frame (SPEC section 5, and more)."""
+    tm = result.timings
+    rays = result.counters["rays"]
+    return {"frame": frame, "time": t, "triangles": int(scene.faces.shape[0]), "rays": rays,
+            "interp_ms": interp_ms, **tm, "write_ms": 0.0,
+            "tri_tests": float(result.counters["tri_tests"]),
+            "shadow_rays": result.counters["shadow_rays"],
+            "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
+            "fallback_rays": result.counters["fallback_rays"],
+            **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
+               else {"kd_nodes": result.counters["kd_nodes"]}),
+            "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
+
+
+def settings_of(cfg: RenderConfig) -> dict:
+    """What decides a frame's pixels, recorded with every run."""
+    return {"accel": cfg.accel, "packet": cfg.packet, "threads": cfg.threads, "spp": cfg.spp,
+            "shadows": cfg.shadows, "grid_density": cfg.grid_density}
+
+
+PHASE_KEYS = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms")
+
+
+def read_stats(path: Path):
+    """An earlier run's stats.json, or None if there is none or it is not
+    one of ours (then this run's stats replace it)."""
+    try:
+        stats = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    frames = stats.get("frames") if isinstance(stats, dict) else None
+    ok = isinstance(frames, list) and all(
+        isinstance(r, dict) and isinstance(r.get("frame"), int)
+        and all(isinstance(r.get(k), (int, float)) for k in PHASE_KEYS) for r in frames)
+    return stats if ok else None
+
+
+def merged_stats(previous, scene, cfg, rows, run) -> dict:
+    """stats.json: this run's frames over an earlier run's, by frame number;
+    the summary's medians over all of them, fps_wall and compile time of
+    this run; every run listed with its settings."""
+    frames = {r["frame"]: r for r in previous["frames"]}
+    runs = [r for r in previous.get("runs", []) if isinstance(r, dict)]
+    for r in rows:
+        frames[r["frame"]] = {**r, "run": len(runs)}
+    merged = [frames[k] for k in sorted(frames)]
+    summary = summarize(merged, run["wall_s"], run["compile_s"])
+    summary["fps_wall"] = len(rows) / run["wall_s"] if rows and run["wall_s"] > 0 else 0.0
+    return {"scene": scene.path.name, "resolution": [cfg.width, cfg.height], **settings_of(cfg),
+            "frames": merged, "runs": runs + [run], "summary": summary}
 
 
 def median_ms(rows, *keys) -> float:
@@ -212,5 +366,4 @@ def summarize(rows, wall_s, compile_s) -> dict:
     return {"fps_raycast": fps_raycast, "fps_full": fps_full,
             "fps_wall": len(rows) / wall_s if rows and wall_s > 0 else 0.0,
             "compile_s": compile_s,
-            "median_ms": {k: median_ms(rows, k) for k in ("interp_ms", "build_ms", "trace_ms",
-                                                         "shade_ms", "shadow_ms", "write_ms")}}
+            "median_ms": {k: median_ms(rows, k) for k in PHASE_KEYS}}

@@ -1,9 +1,18 @@
 """Progress bar and the per-phase summary table (rich)."""
 import contextlib
 
-from rich.console import Console
+from rich.console import Console as RichConsole
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
+
+
+class Console(RichConsole):
+    """rich's Console, except that a reader who stops reading (`| head`)
+    raises BrokenPipeError for the command line to handle (cli/main.py)
+    instead of rich's own exit 1: the work is done by then."""
+
+    def on_broken_pipe(self):
+        raise BrokenPipeError()
 
 
 @contextlib.contextmanager

@@ -103,3 +103,84 @@ def test_negative_frame_numbers_keep_their_padding():
     assert frame_path("f_###.exr", -1) == "f_-001.exr"
     assert frame_path("f_###.exr", 7) == "f_007.exr"
     assert frame_path("f_#.exr", -12) == "f_-12.exr"
+
+
+def test_stl_corners_are_merged_so_normals_are_smooth(tmp_path):
+    import numpy as np
+    import trimesh
+    from anim.mesh_io import load_mesh
+    sphere = trimesh.creation.icosphere(2)
+    sphere.export(tmp_path / "s.stl")                   # 320 triangles, 960 separate corners
+    v, f, _ = load_mesh(tmp_path / "s.stl", "scene.yaml", "objects.0.mesh")
+    assert len(v) == len(sphere.vertices) and f.shape == sphere.faces.shape
+    np.testing.assert_allclose(v[f], sphere.vertices[sphere.faces], atol=1e-6)
+
+
+@pytest.mark.parametrize("content, words", [
+    (None, ["no array 'joints'", "it has: weights"]),
+    (b"not a zip at all", ["not an .npz archive"]),
+])
+def test_weights_files_that_are_not_what_they_should_be(tmp_path, content, words):
+    import numpy as np
+    path = scene_with(tmp_path, """  - name: arm
+    mesh: ball.obj
+    skeleton:
+      weights: w.npz
+      joints: [{name: root}]
+""")
+    if content is None:
+        np.savez(tmp_path / "w.npz", weights=np.ones(10))
+    else:
+        (tmp_path / "w.npz").write_bytes(content)
+    res = run("check", path)
+    assert res.exit_code == 2 and "objects.0.skeleton.weights" in res.output, res.output
+    assert all(w in res.output for w in words) and "pickle" not in res.output, res.output
+
+
+def test_output_paths_are_checked_before_any_work(tmp_path):
+    path = scene_with(tmp_path, BALL)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    cases = [
+        ["render", path, "-o", blocker / "frames", "-q"],
+        ["render", path, "-o", tmp_path / "ok", "--stats", blocker / "stats.json", "-q"],
+        ["bench", "--scene", "demo", "--res", "16", "--frames", "1", "--json", blocker / "b.json"],
+        ["bench", "--scene", "demo", "--res", "16", "--frames", "1", "--plot", tmp_path / "b.xyz"],
+        ["assets", "make", "toys", "-o", tmp_path / "toys", "--preview", tmp_path / "p.xyz"],
+    ]
+    for args in cases:
+        res = run(*args)
+        assert res.exit_code == 2, (args, res.output)
+        lines = res.output.strip().splitlines()
+        assert len(lines) == 1 and "internal error" not in lines[0], (args, res.output)
+    assert not (tmp_path / "ok").exists() or not list((tmp_path / "ok").glob("*.exr"))
+    assert not (tmp_path / "toys" / "anim.yaml").exists()
+
+
+def test_assets_make_refuses_to_replace_an_edited_scene(tmp_path):
+    out = tmp_path / "hand"
+    assert run("assets", "make", "marbles", "-o", out).exit_code == 0
+    (out / "anim.yaml").write_text((out / "anim.yaml").read_text() + "# my edit\n")
+    res = run("assets", "make", "marbles", "-o", out)
+    assert res.exit_code == 2 and "--overwrite" in res.output
+    assert (out / "anim.yaml").read_text().endswith("# my edit\n")
+    assert run("assets", "make", "marbles", "-o", out, "--overwrite").exit_code == 0
+    assert not (out / "anim.yaml").read_text().endswith("# my edit\n")
+
+
+def test_render_at_another_resolution_and_into_a_closed_pipe(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+    path = scene_with(tmp_path, BALL)
+    res = run("render", path, "-o", tmp_path / "out", "--res", "24x18", "--frames", "0:0", "-q")
+    assert res.exit_code == 0, res.output
+    from raycore.image_io import read_exr
+    assert read_exr(str(tmp_path / "out" / "f_00.exr"))[1].shape == (18, 24, 5)
+    assert run("render", path, "--res", "24by18").exit_code == 2
+    root = Path(__file__).resolve().parent.parent
+    proc = subprocess.run(f"'{sys.executable}' -m cli.main render '{path}' -o '{tmp_path / 'p'}' --res 24x18 "
+                          f"| head -c 1 > /dev/null; echo ${{PIPESTATUS[0]}}",
+                          shell=True, executable="/bin/bash", cwd=root, capture_output=True, text=True)
+    assert proc.stdout.strip() == "0" and "Error" not in proc.stderr, proc.stderr
+    assert len(list((tmp_path / "p").glob("*.exr"))) == 4

@@ -1,0 +1,116 @@
+"""The output directory's bookkeeping, so that nothing finished is lost and
+nothing broken is left, across kills, resumes and renders running side by
+side:
+
+* whole_frame: a frame file is only "done" if it is an EXR of this render's
+  size and channels whose last scanline chunk reads back (a file cut short
+  by a crash or a full disk, or one written by something else, is not);
+* remove_stale_temps: a frame is written under `.NAME.PID.tmp.exr` and
+  renamed into place (raycore/image_io.py); a temporary file whose process
+  is gone is a leftover of a kill and is removed;
+* claims: before a render starts a frame it creates `.NAME.claim` (O_EXCL:
+  one winner), holding host and PID, and removes it when the frame is
+  written. Two `--resume` renders into one directory thus share the frames
+  (each skips the other's claims), as Blender's placeholders allow. A claim
+  of a process that is gone (same host) or older than CLAIM_STALE_S (another
+  host, which cannot be asked) is taken over.
+"""
+import os
+import re
+import socket
+import time
+from pathlib import Path
+
+import OpenImageIO as oiio
+
+CLAIM_STALE_S = 600.0
+_TEMP = re.compile(r"^\..+\.(\d+)\.tmp\.exr$")
+
+
+def whole_frame(path: Path, width: int, height: int, channels) -> str:
+    """'' if `path` is a complete frame of this size with these channels,
+    else the reason it is not."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return f"not a readable EXR ({oiio.geterror().strip() or 'unknown format'})"
+    try:
+        spec = inp.spec()
+        if (spec.width, spec.height) != (width, height):
+            return f"is {spec.width}x{spec.height}, this render is {width}x{height}"
+        missing = [c for c in channels if c not in spec.channelnames]
+        if missing:
+            return f"lacks channel(s) {', '.join(missing)}"
+        if inp.read_scanline(spec.y + spec.height - 1, 0, "float") is None:
+            return f"is cut short ({inp.geterror().strip() or 'last scanline unreadable'})"
+        return ""
+    finally:
+        inp.close()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:            # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_temps(directory: Path) -> list:
+    """Remove the temporary frame files in `directory` whose writing process
+    is gone; returns their names."""
+    removed = []
+    if not directory.is_dir():
+        return removed
+    for entry in directory.iterdir():
+        m = _TEMP.match(entry.name)
+        if m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1))):
+            try:
+                entry.unlink()
+                removed.append(entry.name)
+            except FileNotFoundError:
+                pass
+    return removed
+
+
+def claim_path(frame_path: Path) -> Path:
+    return frame_path.with_name(f".{frame_path.name}.claim")
+
+
+def _claim_is_stale(path: Path) -> bool:
+    try:
+        host, pid, _ = path.read_text().split()
+        age = time.time() - path.stat().st_mtime
+    except (OSError, ValueError):
+        return True                    # unreadable or half-written: its writer died at once
+    if host == socket.gethostname():
+        return not _alive(int(pid))
+    return age > CLAIM_STALE_S
+
+
+def claim(frame_path: Path) -> bool:
+    """Claim the frame for this process; False if a live render holds it."""
+    path = claim_path(frame_path)
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            if not _claim_is_stale(path):
+                return False
+            try:
+                path.unlink()          # taken over; if another render races us here, O_EXCL decides
+            except FileNotFoundError:
+                pass
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(f"{socket.gethostname()} {os.getpid()} {time.time():.0f}\n")
+        return True
+    return False
+
+
+def release(frame_path: Path) -> None:
+    try:
+        claim_path(frame_path).unlink()
+    except FileNotFoundError:
+        pass
