@@ -94,10 +94,17 @@ class GltfObject:
             raise SceneError(scene_path, key, f"cannot read glTF {path}: {exc}") from None
         if self.doc is None:
             raise SceneError(scene_path, key, f"cannot read glTF {path}")
-        self._buffers = [self._buffer(i, b) for i, b in enumerate(self.doc.buffers)]
-        self._nodes()
-        self._meshes()
-        self._animation(animation)
+        try:
+            self._buffers = [self._buffer(i, b) for i, b in enumerate(self.doc.buffers)]
+            self._nodes()
+            self._meshes()
+            self._animation(animation)
+        except SceneError:
+            raise
+        except (IndexError, KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+            # an index past its array, a missing or mistyped field: the file is malformed
+            raise SceneError(scene_path, key, f"{Path(path).name}: malformed glTF "
+                                              f"({type(exc).__name__}: {exc})") from None
 
     def _fail(self, problem):
         raise SceneError(self.scene_path, self.key, f"{self.path.name}: {problem}")
@@ -127,6 +134,10 @@ class GltfObject:
         data = self._buffers[view.buffer]
         stride = view.byteStride or dtype.itemsize * width
         start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        end = start + (acc.count - 1) * stride + dtype.itemsize * width if acc.count > 0 else start
+        if acc.count < 0 or start < 0 or stride < dtype.itemsize * width or end > len(data):
+            self._fail(f"accessor {index} ({acc.count} x {acc.type}) reaches byte {end} of a "
+                       f"{len(data)}-byte buffer")
         arr = np.ndarray((acc.count, width), dtype, buffer=data, offset=start,
                          strides=(stride, dtype.itemsize)).copy()
         if acc.normalized and dtype.type in _NORMALIZE:

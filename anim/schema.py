@@ -15,11 +15,16 @@ from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-Vec3 = Tuple[float, float, float]
+# coordinates and colours stay inside float32 with room for arithmetic (anim/tracks.py)
+Coord = Annotated[float, Field(ge=-1e37, le=1e37)]
+Vec3 = Tuple[Coord, Coord, Coord]
 Interp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
                  "pchip", "akima", "makima"]
 TrackInterp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
                       "pchip", "akima", "makima", "slerp", "spline"]
+
+
+MAX_FRAMES = 10_000_000
 
 
 class Strict(BaseModel):
@@ -35,6 +40,8 @@ class Frames(Strict):
     def _order(self):
         if self.end < self.start:
             raise ValueError(f"end ({self.end}) is before start ({self.start})")
+        if self.end - self.start >= MAX_FRAMES:
+            raise ValueError(f"{self.end - self.start + 1:,} frames; at most {MAX_FRAMES:,} (4.8 days at 24 fps)")
         return self
 
 

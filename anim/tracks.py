@@ -8,6 +8,11 @@ from .errors import SceneError
 from .interpolate import METHODS, Curve, RotationCurve, normalized_quaternions
 
 
+# largest keyed value accepted: float32 ends at 3.4e38, and a value is still
+# multiplied and added (scale times vertex, plus translation) before it is a position
+FLOAT32_LIMIT = 1e37
+
+
 def check_times(times, scene_path, key, owner=""):
     """Key times must increase strictly; names the offending key index."""
     times = np.asarray(times, np.float64)
@@ -34,6 +39,9 @@ def _rows(track, width, scene_path, key, owner):
     arr = np.asarray(rows, np.float64)
     if not np.all(np.isfinite(arr)):
         raise SceneError(scene_path, f"{key}.keys", f"{owner}: non-finite number")
+    if arr.size and np.abs(arr[:, 1:]).max() > FLOAT32_LIMIT:
+        raise SceneError(scene_path, f"{key}.keys", f"{owner}: value {np.abs(arr[:, 1:]).max():g} is "
+                                                    f"beyond {FLOAT32_LIMIT:g}: frames are computed in float32")
     return check_times(arr[:, 0], scene_path, f"{key}.keys", owner), arr[:, 1:]
 
 

@@ -147,6 +147,9 @@ def parse_frames(text, scene):
         raise click.BadParameter(f"expected A:B (frame numbers), got {text!r}", param_hint="--frames")
     if end < start:
         raise click.BadParameter(f"end {end} is before start {start}", param_hint="--frames")
+    from anim.schema import MAX_FRAMES
+    if end - start >= MAX_FRAMES:
+        raise click.BadParameter(f"{end - start + 1:,} frames; at most {MAX_FRAMES:,}", param_hint="--frames")
     return list(range(start, end + 1))
 
 
@@ -167,8 +170,11 @@ def parse_frames(text, scene):
 @click.option("--res", callback=lambda ctx, param, v: _resolution(v), metavar="WxH",
               help="Render at W x H instead of output.resolution (a quick preview; the camera's "
                    "field of view is kept vertically).")
+@click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write the frames as one animated .gif or .webp (tone-mapped, at most 640 px) "
+                   "to look at.")
 def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, stats_path,
-           resume, overwrite, quiet, res):
+           resume, overwrite, quiet, res, preview_path):
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
@@ -189,6 +195,10 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     stats_path = stats_path or frames_dir / "stats.json"
     job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite)
     show = not quiet and sys.stderr.isatty()
+    if preview_path:
+        from .paths import writable_file
+        from .preview import FORMATS
+        writable_file(preview_path, "the --preview animation", FORMATS)
     stop = StopRequest()
     before = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -198,6 +208,12 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)
+    if preview_path:
+        from .pipeline import frame_file
+        from .preview import write_animation
+        n = write_animation([frame_file(scene, out_dir, f) for f in frames], preview_path, spec.frames.fps)
+        if not quiet:
+            click.echo(f"wrote {preview_path} ({n} frames)")
     if not quiet:
         if stats["runs"][-1]["frames_rendered"] == 0:
             click.echo(f"nothing to render: all {len(frames)} frames exist and are whole")
@@ -381,12 +397,18 @@ def assets_make(name, out_dir, preview_path, overwrite):
 
 @main.command()
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
-def check(anim_yaml):
+@click.option("--strict", is_flag=True,
+              help="Also reject file references that leave the scene's directory (absolute paths, "
+                   "'..'): a scene shipped to other machines takes its directory only.")
+def check(anim_yaml, strict):
     """Validate ANIM_YAML (schema, meshes, keys, camera at every frame,
     textures) and summarise it; render nothing. What passes here, `render`
     accepts."""
     from .pipeline import shading_of
     scene = load_scene(anim_yaml)
+    if strict and scene.outside_paths:
+        key, ref = scene.outside_paths[0]
+        raise SceneError(anim_yaml, key, f"{ref!r} lies outside the scene's directory (--strict)")
     shading_of(scene)                       # reads every texture, as render does
     spec = scene.spec
     moving = sum(1 for o in scene.objects if not o.static)

@@ -156,6 +156,46 @@ def warm_up(scene, shading, cfg, t) -> float:
     return time.perf_counter() - t0
 
 
+# bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),
+# one light's shadow rays and their sort (52), shaded colour (12), the image
+# ring (2 x 20), the half-float copy and the EXR codec's buffers (~28)
+BYTES_PER_PIXEL = 16 + 96 + 52 + 12 + 40 + 28
+# bytes per triangle: gathered vertices (36), faces and materials (16), normals
+# and their CSR (~24), grid cell lists (~4 cells x 4) and a kd-tree (~64)
+BYTES_PER_TRIANGLE = 36 + 16 + 24 + 16 + 64
+
+
+def available_bytes():
+    """MemAvailable of /proc/meminfo (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(scene, cfg, available=None):
+    """SceneError (exit 2) with the estimate if rendering would not fit in
+    the memory available now, instead of an out-of-memory kill mid-run."""
+    pixels = cfg.width * cfg.height
+    per_pixel = (BYTES_PER_PIXEL + 4 * len(scene.spec.lights)
+                 + sum({"N": 24, "P": 24, "id": 8}[a] for a in cfg.aovs))    # AOV + its EXR copy
+    need = pixels * per_pixel + scene.faces.shape[0] * BYTES_PER_TRIANGLE
+    available = available_bytes() if available is None else available
+    if available is not None and need > 0.9 * available:
+        raise SceneError(scene.path, "output.resolution",
+                         f"{cfg.width}x{cfg.height} with {scene.faces.shape[0]:,} triangles needs about "
+                         f"{_size(need)} of work memory; {_size(available)} are available")
+    return need
+
+
+def _size(n_bytes) -> str:
+    return f"{n_bytes / 1024 ** 3:.1f} GiB" if n_bytes >= 1024 ** 3 else f"{n_bytes / 1024 ** 2:.0f} MiB"
+
+
 class FrameWriteError(OSError):
     """A frame could not be written (disk full, directory gone, I/O error)."""
 
@@ -178,6 +218,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
         for name in remove_stale_temps(directory):
             warn(f"removed {directory / name}, left by a render that was killed")
     writable_file(job.stats_path, "stats.json")
+    check_memory(scene, cfg)
     first_t = scene.time_of(todo[0][0] if todo else scene.frame_numbers[0])
     compile_s = warm_up(scene, shading, cfg, first_t) if todo else 0.0
     renderer = SceneRenderer(scene, cfg, shading) if todo else None

@@ -219,3 +219,19 @@ def test_a_second_ctrl_c_stops_at_once_and_still_leaves_no_broken_file(tmp_path)
     assert proc.wait(timeout=60) == 130
     assert all(whole_frame(p, 96, 72, "RGBAZ") == "" for p in exr_frames(out))
     assert leftovers(out) == []
+
+
+def test_a_render_that_would_not_fit_in_memory_is_refused_with_the_estimate(tmp_path, monkeypatch):
+    import cli.pipeline
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "huge"), "--res", "16384x16384", "-q"])
+    if cli.pipeline.available_bytes() and cli.pipeline.available_bytes() < 60 * 1024 ** 3:
+        assert res.exit_code == 2 and "GiB of work memory" in res.output, res.output
+    # a normal frame on a machine that has (pretended) 50 MB left: refused before the first frame
+    monkeypatch.setattr(cli.pipeline, "available_bytes", lambda: 50 * 1024 ** 2)
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "out"), "--res", "1024x1024", "-q"])
+    assert res.exit_code == 2 and "output.resolution" in res.output and "50 MiB are available" in res.output
+    assert not list((tmp_path / "out").glob("*.exr")) if (tmp_path / "out").exists() else True
+    monkeypatch.setattr(cli.pipeline, "available_bytes", lambda: 8 * 1024 ** 3)
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "ok"), "--res", "64x48",
+                                    "--frames", "0:0", "-q"])
+    assert res.exit_code == 0, res.output

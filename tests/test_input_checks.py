@@ -1,6 +1,7 @@
 """Mistakes in a scene file that used to pass silently, or pass `check` and
 then fail `render`: each is exit 2 with one line naming the key, from `check`
 and `render` alike, or a warning where the scene is still meaningful."""
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -184,3 +185,92 @@ def test_render_at_another_resolution_and_into_a_closed_pipe(tmp_path):
                           shell=True, executable="/bin/bash", cwd=root, capture_output=True, text=True)
     assert proc.stdout.strip() == "0" and "Error" not in proc.stderr, proc.stderr
     assert len(list((tmp_path / "p").glob("*.exr"))) == 4
+
+
+def test_paths_leaving_the_scene_directory_warn_and_fail_strict_check(tmp_path):
+    import shutil
+    scene_dir = tmp_path / "scene"
+    scene_dir.mkdir()
+    path = scene_with(scene_dir, "  - {name: ball, mesh: ../shared/ball.obj}\n")
+    (tmp_path / "shared").mkdir()
+    shutil.copy(scene_dir / "ball.obj", tmp_path / "shared" / "ball.obj")
+    res = run("check", path)
+    assert res.exit_code == 0 and "objects.0.mesh" in res.stderr and "outside" in res.stderr, res.output
+    res = run("check", "--strict", path)
+    assert res.exit_code == 2 and "objects.0.mesh" in res.output and "--strict" in res.output
+
+
+@pytest.mark.parametrize("value, ok", [(1e30, True), (1e-30, True), (1e39, False)])
+def test_huge_and_tiny_keyed_values(tmp_path, value, ok):
+    path = scene_with(tmp_path, f"""  - name: ball
+    mesh: ball.obj
+    transform: {{translation: {{keys: [[0, 0, 0, 0], [1, {value}, 0, 0]]}}}}
+""")
+    res = run("render", path, "-o", tmp_path / "out", "--res", "16x12", "-q")
+    if ok:
+        assert res.exit_code == 0, res.output
+    else:
+        assert res.exit_code == 2 and "transform.translation.keys" in res.output and "float32" in res.output
+
+
+def test_a_hundred_thousand_keys_load_and_render(tmp_path):
+    """Long key lists are parsed by libyaml (about 3 s per 100,000 keys of
+    four numbers; a million take about 35 s) and evaluated by binary search."""
+    rows = ", ".join(f"[{i * 1e-5:.5f}, {np.sin(i * 1e-3):.6f}, 0, 0]" for i in range(100_000))
+    path = scene_with(tmp_path, f"""  - name: ball
+    mesh: ball.obj
+    transform: {{translation: {{keys: [{rows}]}}}}
+""")
+    res = run("render", path, "-o", tmp_path / "out", "--res", "16x12", "-q")
+    assert res.exit_code == 0, res.output
+
+
+def test_a_gltf_accessor_past_its_buffer_is_named(tmp_path):
+    from gltf_files import GltfBuilder
+    b = GltfBuilder()
+    mesh = b.mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), [0, 1, 2])
+    b.doc.accessors[0].count = 1000                     # 1000 positions in a 36-byte view
+    b.save(tmp_path / "bad.glb", [b.node(mesh=mesh)])
+    path = scene_with(tmp_path, "  - {name: g, mesh: bad.glb}\n")
+    res = run("check", path)
+    assert res.exit_code == 2 and "objects.0.mesh" in res.output and "accessor 0" in res.output, res.output
+
+
+@pytest.mark.parametrize("joints, words", [
+    ("[{name: a, parent: b}, {name: b}]", ["parent 'b' must be a joint listed before"]),
+    ("[{name: a, parent: a}]", ["parent 'a' must be a joint listed before"]),     # a cycle of one
+    ("[{name: a}, {name: a}]", ["repeats"]),
+])
+def test_skeletons_with_cycles_or_missing_parents(tmp_path, joints, words):
+    path = scene_with(tmp_path, f"""  - name: arm
+    mesh: ball.obj
+    skeleton: {{weights: w.npz, joints: {joints}}}
+""")
+    n_vertices = sum(1 for line in (tmp_path / "ball.obj").read_text().splitlines() if line.startswith("v "))
+    np.savez(tmp_path / "w.npz", joints=np.zeros(n_vertices, int), weights=np.ones(n_vertices))
+    res = run("check", path)
+    assert res.exit_code == 2 and "skeleton.joints" in res.output and all(w in res.output for w in words), res.output
+
+
+def test_all_zero_weights_are_named(tmp_path):
+    path = scene_with(tmp_path, """  - name: arm
+    mesh: ball.obj
+    skeleton: {weights: w.npz, joints: [{name: root}]}
+""")
+    n_vertices = sum(1 for line in (tmp_path / "ball.obj").read_text().splitlines() if line.startswith("v "))
+    np.savez(tmp_path / "w.npz", joints=np.zeros(n_vertices, int), weights=np.zeros(n_vertices))
+    res = run("check", path)
+    assert res.exit_code == 2 and "has no weight" in res.output, res.output
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".webp"])
+def test_render_preview_animation(tmp_path, suffix):
+    from PIL import Image
+    camera = "camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0, 0]}, {t: 2, eye: [4, 1, 4], look_at: [0, 0, 0]}]}"
+    path = scene_with(tmp_path, BALL, camera_yaml=camera)    # frames 0..3 at 2 fps, camera moving
+    out = tmp_path / f"anim{suffix}"
+    res = run("render", path, "-o", tmp_path / "out", "--res", "32x24", "-q", "--preview", out)
+    assert res.exit_code == 0, res.output
+    with Image.open(out) as im:
+        assert im.n_frames == 4 and im.size == (32, 24)
+    assert run("render", path, "-o", tmp_path / "o2", "--preview", tmp_path / "a.mp4").exit_code == 2
