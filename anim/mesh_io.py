@@ -47,3 +47,17 @@ def merge_coincident(vertices, faces):
     rank[np.argsort(first)] = np.arange(len(first))
     return (np.ascontiguousarray(vertices[np.sort(first)]),
             np.ascontiguousarray(rank[inverse.reshape(-1)][faces], np.int32))
+
+
+def vertex_lines(path) -> int:
+    """How many vertices an OBJ file writes ('v ' lines), counted as
+    written: the loader drops vertices no face uses, which would hide an
+    extra or missing line that shifts every index after it."""
+    n = 0
+    try:
+        with open(path, "rb") as f:
+            for line in f:
+                n += line[:2] in (b"v ", b"v\t")
+    except OSError:
+        return -1
+    return n

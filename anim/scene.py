@@ -14,7 +14,7 @@ from pydantic import ValidationError
 from .errors import SceneError
 from .gltf import GltfObject
 from .interpolate import Curve
-from .mesh_io import load_mesh
+from .mesh_io import load_mesh, vertex_lines
 from .rig import Skeleton
 from .rigid_batch import RigidBatch
 from .schema import SceneFile
@@ -94,6 +94,14 @@ class SceneObject:
             meshes = [load_mesh(base / k.mesh, scene_path, f"{key}.keyframes.{i}.mesh")
                       for i, k in enumerate(spec.keyframes)]
             v0, self.faces, self.uvs = meshes[0]
+            written = [vertex_lines(base / k.mesh) if k.mesh.lower().endswith(".obj") else None
+                       for k in spec.keyframes]
+            for i in range(1, len(written)):
+                if written[i] != written[0] and None not in (written[i], written[0]):
+                    raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",
+                                     f"{spec.keyframes[i].mesh} writes {written[i]} vertices, keyframe 0 "
+                                     f"({spec.keyframes[0].mesh}) {written[0]}: the files' vertex lists "
+                                     "must correspond line by line")
             for i, (v, f, _) in enumerate(meshes[1:], start=1):
                 if v.shape != v0.shape or not np.array_equal(f, self.faces):
                     raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",

@@ -7,6 +7,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 
 import click
@@ -64,7 +65,11 @@ class Group(click.Group):
         main_thread = threading.current_thread() is threading.main_thread()
         before = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
-            return super().invoke(ctx)
+            # libraries' own warnings (numpy overflow notes, pygltflib's "ignoring
+            # chunk") are not for users: frustrace's warnings go through click.echo
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return super().invoke(ctx)
         except SceneError as exc:
             click.echo(f"frustrace: error: {exc}", err=True)
             sys.exit(2)

@@ -6,8 +6,9 @@ side:
   size and channels whose last scanline chunk reads back (a file cut short
   by a crash or a full disk, or one written by something else, is not);
 * remove_stale_temps: a frame is written under `.NAME.PID.tmp.exr` and
-  renamed into place (raycore/image_io.py); a temporary file whose process
-  is gone is a leftover of a kill and is removed;
+  renamed into place (raycore/image_io.py), stats.json and claims likewise
+  under `.NAME.PID.tmp`; such a file whose process is gone is a leftover of
+  a kill and is removed;
 * claims: before a render starts a frame it creates `.NAME.claim` (O_EXCL:
   one winner), holding host and PID, and removes it when the frame is
   written. Two `--resume` renders into one directory thus share the frames
@@ -24,7 +25,7 @@ from pathlib import Path
 import OpenImageIO as oiio
 
 CLAIM_STALE_S = 600.0
-_TEMP = re.compile(r"^\..+\.(\d+)\.tmp\.exr$")
+_TEMP = re.compile(r"^\..+\.(\d+)\.tmp(\.exr)?$")     # frames, claims and stats being written
 
 
 def whole_frame(path: Path, width: int, height: int, channels) -> str:
@@ -90,23 +91,28 @@ def _claim_is_stale(path: Path) -> bool:
 
 
 def claim(frame_path: Path) -> bool:
-    """Claim the frame for this process; False if a live render holds it."""
+    """Claim the frame for this process; False if a live render holds it.
+    The claim appears with its content in one step (written aside, then
+    hard-linked into place, which fails if a claim exists), so no render
+    ever reads a half-written claim and takes it for a dead one."""
     path = claim_path(frame_path)
-    for _ in range(2):
-        try:
-            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            if not _claim_is_stale(path):
-                return False
+    mine = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    mine.write_text(f"{socket.gethostname()} {os.getpid()} {time.time():.0f}\n")
+    try:
+        for _ in range(2):
             try:
-                path.unlink()          # taken over; if another render races us here, O_EXCL decides
-            except FileNotFoundError:
-                pass
-            continue
-        with os.fdopen(fd, "w") as f:
-            f.write(f"{socket.gethostname()} {os.getpid()} {time.time():.0f}\n")
-        return True
-    return False
+                os.link(mine, path)
+                return True
+            except FileExistsError:
+                if not _claim_is_stale(path):
+                    return False
+                try:
+                    path.unlink()      # taken over; if another render races us here, the link decides
+                except FileNotFoundError:
+                    pass
+        return False
+    finally:
+        mine.unlink()
 
 
 def release(frame_path: Path) -> None:

@@ -235,3 +235,26 @@ def test_a_render_that_would_not_fit_in_memory_is_refused_with_the_estimate(tmp_
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "ok"), "--res", "64x48",
                                     "--frames", "0:0", "-q"])
     assert res.exit_code == 0, res.output
+
+
+def test_symlinks_in_the_output_directory_are_replaced_not_followed(tmp_path):
+    victim = tmp_path / "precious.exr"
+    victim.write_bytes(b"someone else's file")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "frame_0000.exr").symlink_to(victim)
+    (out / "stats.json").symlink_to(tmp_path / "precious.json")
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(out), "--frames", "0:0", "--res", "16x12",
+                                    "--overwrite", "-q"])
+    assert res.exit_code == 0, res.output
+    assert victim.read_bytes() == b"someone else's file" and not (tmp_path / "precious.json").exists()
+    assert not (out / "frame_0000.exr").is_symlink() and not (out / "stats.json").is_symlink()
+
+
+def test_ctrl_c_in_bench_says_nothing_about_frames(tmp_path):
+    proc = frustrace("bench", "--scene", "demo", "--res", "2048", "--frames", "2000", "--packet", "8")
+    time.sleep(5)                              # well inside its minutes of frames
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=60) == 130
+    err = proc.stderr.read()
+    assert "interrupted" in err and "frame" not in err and "Traceback" not in err, err

@@ -274,3 +274,15 @@ def test_render_preview_animation(tmp_path, suffix):
     with Image.open(out) as im:
         assert im.n_frames == 4 and im.size == (32, 24)
     assert run("render", path, "-o", tmp_path / "o2", "--preview", tmp_path / "a.mp4").exit_code == 2
+
+
+def test_a_keyframe_obj_with_an_extra_vertex_line_is_named(tmp_path):
+    path = scene_with(tmp_path, """  - name: tube
+    keyframes: [{t: 0, mesh: tube_000.obj}, {t: 1, mesh: tube_001.obj}]
+""")
+    lines = (tmp_path / "tube_001.obj").read_text().splitlines(keepends=True)
+    first_v = next(i for i, line in enumerate(lines) if line.startswith("v "))
+    lines.insert(first_v + 3, "v 9 9 9\n")         # unreferenced by faces: the loader would drop it
+    (tmp_path / "tube_001.obj").write_text("".join(lines))
+    res = run("check", path)
+    assert res.exit_code == 2 and "keyframes.1.mesh" in res.output and "line by line" in res.output, res.output
