@@ -14,12 +14,13 @@ from cli.main import main
 DENSE = np.linspace(-0.5, 4.5, 5001)
 
 
+@pytest.mark.parametrize("gap", [1e-9, 1e-12])
 @pytest.mark.parametrize("method", METHODS)
-def test_keys_1e9_apart_with_a_jump_do_not_blow_up(method):
-    times = [0.0, 1.0, 2.0, 2.0 + 1e-9, 3.0, 4.0]
+def test_keys_1e9_apart_with_a_jump_do_not_blow_up(method, gap):
+    times = [0.0, 1.0, 2.0, 2.0 + gap, 3.0, 4.0]
     values = [[0.0], [0.5], [1.0], [-1.0], [-0.5], [0.0]]     # a cut at t = 2
     curve = Curve(times, values, method)
-    y = np.array([curve(t)[0] for t in np.concatenate([DENSE, 2.0 + np.linspace(0, 1e-9, 11)])])
+    y = np.array([curve(t)[0] for t in np.concatenate([DENSE, 2.0 + np.linspace(0, gap, 11)])])
     assert np.all(np.isfinite(y))
     assert np.abs(y).max() <= 1.5, np.abs(y).max()
     assert break_segments(np.asarray(times)).tolist() == [False, False, True, False, False]
