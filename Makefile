@@ -16,9 +16,9 @@ $(STAMP): pyproject.toml | $(PY)
 
 install: $(STAMP)
 
-## Install, then render the demo animation in assets/ to out/.
+## Install, then render the demo animation (shipped in the package: anim/builtin/demo/) to out/.
 render: $(STAMP)
-	$(VENV)/bin/frustrace render assets/demo/anim.yaml -o out --overwrite
+	$(VENV)/bin/frustrace render anim/builtin/demo/anim.yaml -o out --overwrite
 
 ## Install with test extras, then run the test suite.
 test: $(STAMP)

@@ -1,4 +1,4 @@
-"""Writes the demo animation in assets/demo/: a tube that bends (vertex
+"""Writes the demo animation in anim/builtin/demo/: a tube that bends (vertex
 keyframes), a ball that bounces and spins (TRS tracks), a checkered floor
 (texture), one point light. Deterministic; re-run to regenerate."""
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 
 from anim.builtin.shapes import icosphere
 
-HERE = Path(__file__).parent / "demo"
+HERE = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo"
 
 
 def write_obj(path, vertices, faces, uvs=None):

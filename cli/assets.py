@@ -10,7 +10,7 @@ from anim import builtin
 def scene_rows():
     """name, triangles, target, description for every built-in scene."""
     rows = []
-    for name in builtin.SCENES:
+    for name in builtin.ALL:
         scene = builtin.get(name)
         rows.append({"name": name, "triangles": scene.triangles, "target": scene.target_triangles,
                      "description": scene.description})

@@ -20,20 +20,15 @@ from raycore.image_io import write_exr
 
 from .pipeline import SceneRenderer, config_of, fps_of, median_ms, shading_of
 
-DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
-SCENE_NAMES = ("demo", *builtin.SCENES)
+SCENE_NAMES = tuple(builtin.ALL)
 
 
 def scene_file(name: str, workdir: Path) -> Path:
-    """Path of a built-in scene's anim.yaml, generating it if procedural."""
-    if name == "demo":
-        if not DEMO.is_file():
-            raise SceneError(DEMO, "", "the demo scene ships with the source tree only")
-        return DEMO
-    if name not in builtin.SCENES:
+    """A built-in scene's anim.yaml written into workdir/name (generated, or
+    the demo's shipped files copied)."""
+    if name not in builtin.ALL:
         raise SceneError("--scene", "", f"unknown scene {name!r}; built-in: {', '.join(SCENE_NAMES)}")
-    out = workdir / name
-    return builtin.get(name).write(out)
+    return builtin.get(name).write(workdir / name)
 
 
 def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int,

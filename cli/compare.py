@@ -33,13 +33,25 @@ def parse_structures(tokens):
     return names, path
 
 
-def compare(path, names, n_frames, res, threads):
-    """{'rows': [...per structure...], 'diff': [...vs the first...]}."""
+def compare_size(scene, res):
+    """(width, height): the scene's output.resolution, or `res` pixels wide
+    with the scene's aspect kept."""
+    w, h = scene.spec.output.resolution
+    if res is None:
+        return w, h
+    return res, max(1, round(res * h / w))
+
+
+def compare(path, names, n_frames, res, threads, label=None):
+    """{'rows': [...per structure...], 'diff': [...vs the first...]}; the
+    image is `res` pixels wide (None: the scene's resolution), the scene
+    named `label` (default: its path)."""
     scene = AnimatedScene(path)
     frames = scene.frame_numbers[:max(1, n_frames)]
+    width, height = compare_size(scene, res)
     rows, images = [], {}
     for name in names:
-        cfg = config_of(scene, width=res, height=res, threads=threads, aovs=(), **STRUCTURES[name])
+        cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
         renderer = SceneRenderer(scene, cfg, shading_of(scene))
         renderer.render(scene.time_of(frames[0]))                 # compile / warm up
         timings = []
@@ -53,7 +65,7 @@ def compare(path, names, n_frames, res, threads):
                 images[name] = result._replace(rgba=result.rgba.copy(), z=result.z.copy())
         fps_raycast, fps_full = fps_of(timings)
         from raycore.frame import KD_PACKET
-        rows.append({"structure": name, "triangles": int(scene.faces.shape[0]), "resolution": res,
+        rows.append({"structure": name, "triangles": int(scene.faces.shape[0]), "resolution": [width, height],
                      "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
                      "frames": len(frames),
                      **{k: median_ms(timings, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
@@ -73,4 +85,4 @@ def compare(path, names, n_frames, res, threads):
                       "pixels_depth_diff_over_1e-5": int(np.sum(rel > 1e-5)),
                       "max_rgba_diff": float(np.abs(ref.rgba - img.rgba).max()),
                       "pixels_rgba_diff_over_1e-2": int(np.sum(np.abs(ref.rgba - img.rgba).max(axis=-1) > 1e-2))})
-    return {"scene": str(path), "rows": rows, "diff": diffs}
+    return {"scene": label or str(path), "rows": rows, "diff": diffs}

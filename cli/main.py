@@ -164,7 +164,7 @@ def parse_frames(text, scene):
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
 @click.option("--accel", type=click.Choice(["grid", "kdtree"]), help="Acceleration structure: the per-frame uniform grid, or an SAH kd-tree with frustum traversal (default: render.accel, grid).")
-@click.option("--packet", type=click.Choice(["4", "8", "16", "32"]), help="Primary-ray packet size N (NxN rays per frustum; default: render.packet, 32 if unset: the fastest in bench).")
+@click.option("--packet", type=click.Choice(["4", "8", "16", "32"]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree always uses 8x8.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
@@ -193,6 +193,10 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     scene.check_camera(frames)                 # frames outside the file's range too
     n_threads = set_threads(threads)
     width, height = res if res else (None, None)
+    if packet and (accel or spec.render.accel) == "kdtree":
+        from raycore.frame import KD_PACKET
+        click.echo(f"frustrace: warning: --packet is for the grid; the kd-tree traces "
+                   f"{KD_PACKET}x{KD_PACKET} packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     shadows=spec.render.shadows and not no_shadows, accel=accel, width=width, height=height)
     first = Path(frame_path(spec.output.path, frames[0]))
@@ -318,7 +322,9 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
 @click.option("--scene", "scene_name", help="A built-in scene instead of ANIM.yaml (see `assets list`).")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=8, show_default=True,
               help="Frames timed per structure (medians; a warm-up frame comes first).")
-@click.option("--res", type=click.IntRange(16, 8192), default=1024, show_default=True, help="Image size N (NxN).")
+@click.option("--res", type=click.IntRange(16, 8192),
+              help="Image width; the height follows the scene's aspect. Default: the scene file's "
+                   "output.resolution (built-in scenes: 1024x1024).")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the table as JSON.")
 def compare(structures, scene_name, n_frames, res, threads, json_path):
@@ -345,10 +351,10 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
     with tempfile.TemporaryDirectory(prefix="frustrace-compare-") as tmp:
         if scene_name is not None:
             from anim import builtin
-            if scene_name not in builtin.SCENES and scene_name != "demo":
+            if scene_name not in builtin.ALL:
                 raise click.BadParameter(f"unknown scene {scene_name!r}", param_hint="--scene")
             path = scene_file(scene_name, Path(tmp))
-        result = run_compare(Path(path), names, n_frames, res, n_threads)
+        result = run_compare(Path(path), names, n_frames, res, n_threads, label=scene_name or str(path))
     result["threads"] = n_threads
     compare_table(result)
     if json_path:
@@ -383,8 +389,8 @@ def assets_make(name, out_dir, preview_path, overwrite):
     from anim.errors import SceneError
     from .assets import make, render_preview
     from .paths import PREVIEW_FORMATS, writable_dir, writable_file
-    if name not in builtin.SCENES:
-        raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.SCENES)}",
+    if name not in builtin.ALL:
+        raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.ALL)}",
                                  param_hint="NAME")
     out_dir = out_dir or Path(name)
     if (out_dir / "anim.yaml").exists() and not overwrite:

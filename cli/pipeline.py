@@ -22,7 +22,7 @@ import numpy as np
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
+from raycore.frame import KD_PACKET, CameraPose, FrameBuffers, Geometry, Shading, render_frame
 from raycore.image_io import read_texture, write_exr
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
@@ -352,9 +352,10 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
 
 
 def settings_of(cfg: RenderConfig) -> dict:
-    """What decides a frame's pixels, recorded with every run."""
-    return {"accel": cfg.accel, "packet": cfg.packet, "threads": cfg.threads, "spp": cfg.spp,
-            "shadows": cfg.shadows, "grid_density": cfg.grid_density}
+    """What decides a frame's pixels, recorded with every run; the packet
+    size the accelerator really used (the kd-tree's is always KD_PACKET)."""
+    return {"accel": cfg.accel, "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
+            "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density}
 
 
 PHASE_KEYS = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms")

@@ -85,7 +85,8 @@ def compare_table(result):
     rows = result["rows"]
     r0 = rows[0]
     table = Table(title=f"frustrace compare: {result['scene']}  {r0['triangles']} triangles  "
-                        f"{r0['resolution']}²  {r0['frames']} frames  {result.get('threads', '?')} threads "
+                        f"{r0['resolution'][0]}x{r0['resolution'][1]}  {r0['frames']} frames  "
+                        f"{result.get('threads', '?')} threads "
                         "(medians per frame)")
     for col in ("structure", "packet", "build ms", "trace ms", "shadow ms", "fps_raycast", "fps_full",
                 "primary tests", "all tests", "cells/nodes per packet", "published tests"):

@@ -17,7 +17,7 @@ from anim.scene import AnimatedScene
 from cli.pipeline import SceneRenderer, config_of, shading_of
 from raycore._jit import set_threads
 
-DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo" / "anim.yaml"
+DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo" / "anim.yaml"
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from cli.main import main
 from raycore.image_io import COMPRESSIONS, read_exr, write_exr
 
-DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
+DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo"
 
 
 def test_exr_round_trip_types_and_metadata(tmp_path):

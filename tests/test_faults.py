@@ -20,7 +20,7 @@ from cli.main import main
 from raycore.image_io import read_exr
 
 ROOT = Path(__file__).resolve().parent.parent
-DEMO = ROOT / "assets" / "demo" / "anim.yaml"
+DEMO = ROOT / "anim" / "builtin" / "demo" / "anim.yaml"
 N_FRAMES = 40
 ARGS = ["--frames", f"0:{N_FRAMES - 1}", "--res", "96x72", "-q"]
 KILLS = int(os.environ.get("FRUSTRACE_KILLS", "20"))

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from cli.main import main
 from gltf_files import GltfBuilder
 
-DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
+DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo"
 EXAMPLES = int(os.environ.get("FRUSTRACE_FUZZ_EXAMPLES", "60"))
 FUZZ = settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

@@ -11,7 +11,7 @@ from anim.errors import SceneError
 from raycore.config import RenderConfig
 from cli.pipeline import SceneRenderer, shading_of
 
-DEMO = Path(__file__).resolve().parent.parent / "assets" / "demo"
+DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo"
 
 
 def scene_with(tmp_path, objects_yaml, camera_yaml="camera: {eye: [0, 1, 6], look_at: [0, 0.5, 0], fov: 40}",
