@@ -59,14 +59,17 @@ def _alive(pid: int) -> bool:
 
 
 def remove_stale_temps(directory: Path) -> list:
-    """Remove the temporary frame files in `directory` whose writing process
-    is gone; returns their names."""
+    """Remove the temporary files and the claims in `directory` whose process
+    is gone (a claim's frame may have been written just before the kill, so
+    no later run would claim, and release, it again); returns their names."""
     removed = []
     if not directory.is_dir():
         return removed
     for entry in directory.iterdir():
         m = _TEMP.match(entry.name)
-        if m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1))):
+        stale = (m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))) or \
+            (entry.name.startswith(".") and entry.name.endswith(".claim") and _claim_is_stale(entry))
+        if stale:
             try:
                 entry.unlink()
                 removed.append(entry.name)
