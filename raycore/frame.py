@@ -10,19 +10,18 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .accelerators import KD_PACKET, GridAccel, KdAccel
 from .camera import camera_basis
 from .config import RenderConfig
 from .kdtree_build import build_kdtree
-from .kdtree_trace import kd_light_visibility, kd_trace_camera
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
 from .shadow_packets import LightRays
 from .surface import visible_surface
+from .trace import camera_buffers
 from .workspace import Workspace
-from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera
 
-# kd-tree camera packets: 8x8 rays per frustum (the grid's packet size is cfg.packet)
-KD_PACKET = 8
+__all__ = ["KD_PACKET", "CameraPose", "FrameBuffers", "FrameResult", "Geometry", "Shading", "render_frame"]
 
 
 class Geometry(NamedTuple):
@@ -125,9 +124,10 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                 "primary_packets": 0, "primary_visits": 0, "primary_tests": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
-    kd = cfg.accel == "kdtree"
+    # the structure is chosen here, once: everything below goes through its
+    # common surface (accelerators.py)
     t0 = time.perf_counter()
-    if kd:
+    if cfg.accel == "kdtree":
         tri_verts = scene_grid.gather(geom.vertices)
         tree = scene_grid.kd_tree
         if tree is None:
@@ -135,9 +135,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             if scene_grid.all_static:           # a fly-through: build the tree once
                 scene_grid.kd_tree = tree
         counters["kd_nodes"] = int(len(tree.axis))
+        accel = KdAccel(tree, tri_verts)
     else:
         grid, tri_verts = scene_grid.update(geom.vertices)
         counters["grid_dims"] = [int(d) for d in grid.dims]
+        accel = GridAccel(grid, tri_verts, cfg.packet, cfg.grid_cull, buffers.camera)
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
 
     t0 = time.perf_counter()
@@ -159,22 +161,17 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     aov_n = aov_p = first_prim = None
     for pass_index, jitter in enumerate(offsets):
         t0 = time.perf_counter()
-        if kd:
-            hits = Hits(*kd_trace_camera(tree, tri_verts, cam, W, H, KD_PACKET, jitter))
-            layout = row_major_offsets(W, H)
-        else:
-            hits = trace_camera(grid, tri_verts, cam, W, H, cfg.packet, jitter, buffers.camera,
-                                row_major=False, cull=cfg.grid_cull)
-            layout = (buffers.camera.row_off, buffers.camera.col_off)
+        hits, layout = accel.trace_camera(cam, W, H, jitter)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
+        c = hits.counters
         counters["rays"] += W * H
-        counters["cells"] += int(hits.counters[1])
-        counters["tri_tests"] += int(hits.counters[2])
-        counters["fallback_rays"] += int(hits.counters[4])
+        counters["cells"] += c.visits
+        counters["tri_tests"] += c.tests
+        counters["fallback_rays"] += c.fallback_rays
         # primary rays alone (grid: cells; kd-tree: nodes), for `frustrace compare`
-        counters["primary_packets"] += int(hits.counters[0])
-        counters["primary_visits"] += int(hits.counters[1])
-        counters["primary_tests"] += int(hits.counters[2])
+        counters["primary_packets"] += c.packets
+        counters["primary_visits"] += c.visits
+        counters["primary_tests"] += c.tests
 
         t0 = time.perf_counter()
         surface = visible_surface(cam, jitter, hits.t, hits.prim, hits.b1, hits.b2, *layout,
@@ -191,14 +188,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             for li in lit:
                 rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
                                  buffers.work)
-                if kd:
-                    _, c = kd_light_visibility(tree, tri_verts, rays, vis[li])
-                else:
-                    _, c = light_visibility(grid, tri_verts, rays, vis[li], cull=cfg.grid_cull)
+                c = accel.trace_shadows(rays, vis[li])
                 counters["shadow_rays"] += rays.n_active
                 counters["shadow_rays_skipped"] += n_vis - rays.n_active
-                counters["tri_tests"] += int(c[2])
-                counters["cells"] += int(c[1])
+                counters["tri_tests"] += c.tests
+                counters["cells"] += c.visits
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()

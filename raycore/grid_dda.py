@@ -41,9 +41,11 @@ def dda_trace(ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit,
     t0, t1 = clip_to_box(o, d, g_lo, g_hi, t_min, t_max)
     if not (t0 <= t1) or dx == 0.0 and dy == 0.0 and dz == 0.0:
         return best_t, best_prim, best_b1, best_b2, 0, 0
-    # Woop shear for this ray (largest axis)
+    # Woop shear for this ray (largest axis), in float32 like the packets': a
+    # float64 shear (1.0 / float32 is float64 in numba) loses watertightness,
+    # and a ray through a shared vertex then missed all six triangles around it
     kx, ky, kz = ray_axes(dx, dy, dz)
-    sz = 1.0 / d[kz]
+    sz = np.float32(1.0) / d[kz]
     sx = d[kx] * sz
     sy = d[ky] * sz
     # DDA set-up at the entry point

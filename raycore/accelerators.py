@@ -1,0 +1,85 @@
+"""One surface for every acceleration structure, as trimesh's ray backends
+share one: `trace_camera`, `trace_shadows` and `trace_rays` with the same
+arguments and the same results, so that the frame (frame.py) picks its
+structure once and never asks which one it has.
+
+  GridAccel  the per-frame uniform grid: camera packets by Coherent Grid
+             Traversal (tiles.py), shadow rays in light-space packets
+             (shadow_packets.py), ray batches in packets;
+  KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
+             shadow rays and batches one by one (kdtree_trace.py).
+
+Counters are named (Counters): `visits` are grid cells or kd nodes, and
+`candidates` are triangles surviving the grid's culling or kd leaves.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from .grid_build import Grid
+from .kdtree_build import KdTree
+from .kdtree_trace import kd_light_visibility, kd_trace_camera, kd_trace_rays
+from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera, trace_rays
+
+# the kd-tree's camera packets are always KD_PACKET^2 rays
+KD_PACKET = 8
+
+
+class Counters(NamedTuple):
+    """Work done by one call, summed over its packets."""
+    packets: int
+    visits: int          # grid cells / kd-tree nodes visited
+    tests: int           # ray-triangle tests
+    candidates: int      # grid: triangles past mailbox and culling; kd-tree: leaves visited
+    fallback_rays: int   # rays traced one by one because their packet had no common direction
+
+    @classmethod
+    def of(cls, raw):
+        return cls(*(int(v) for v in np.asarray(raw)[:5]))
+
+
+class GridAccel:
+    """The uniform grid of this frame (grid_build.Grid) over tri_verts."""
+    name = "grid"
+
+    def __init__(self, grid: Grid, tri_verts, packet: int, cull=True, buffers=None):
+        self.grid, self.tri_verts, self.packet, self.cull = grid, tri_verts, packet, cull
+        self.buffers = buffers
+
+    def trace_camera(self, cam, width, height, jitter):
+        """(Hits, (row_off, col_off)): hit of pixel (x, y) at row_off[y] + col_off[x]."""
+        if self.buffers is None or self.buffers.key != (width, height, self.packet):
+            self.buffers = camera_buffers(width, height, self.packet)
+        hits = trace_camera(self.grid, self.tri_verts, cam, width, height, self.packet, jitter,
+                            self.buffers, row_major=False, cull=self.cull)
+        return hits._replace(counters=Counters.of(hits.counters)), (self.buffers.row_off, self.buffers.col_off)
+
+    def trace_shadows(self, rays, vis) -> Counters:
+        """vis[i] = 1 where shadow ray i (shadow_packets.LightRays) reaches its light, else 0."""
+        _, c = light_visibility(self.grid, self.tri_verts, rays, vis, cull=self.cull)
+        return Counters.of(c)
+
+    def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:
+        h = trace_rays(self.grid, self.tri_verts, origins, dirs, t_min, t_max, any_hit=any_hit)
+        return h._replace(counters=Counters.of(h.counters))
+
+
+class KdAccel:
+    """An SAH kd-tree (kdtree_build.KdTree) over tri_verts."""
+    name = "kdtree"
+    packet = KD_PACKET
+
+    def __init__(self, tree: KdTree, tri_verts):
+        self.tree, self.tri_verts = tree, tri_verts
+
+    def trace_camera(self, cam, width, height, jitter):
+        hits = Hits(*kd_trace_camera(self.tree, self.tri_verts, cam, width, height, KD_PACKET, jitter))
+        return hits._replace(counters=Counters.of(hits.counters)), row_major_offsets(width, height)
+
+    def trace_shadows(self, rays, vis) -> Counters:
+        _, c = kd_light_visibility(self.tree, self.tri_verts, rays, vis)
+        return Counters.of(c)
+
+    def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:
+        h = Hits(*kd_trace_rays(self.tree, self.tri_verts, origins, dirs, t_min, t_max, any_hit))
+        return h._replace(counters=Counters.of(h.counters))
