@@ -13,7 +13,9 @@ glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`.
 import re
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from raycore.config import PACKET_SIZES
 
 # coordinates and colours stay inside float32 with room for arithmetic (anim/tracks.py)
 Coord = Annotated[float, Field(ge=-1e37, le=1e37)]
@@ -93,12 +95,19 @@ class Camera(Strict):
 
 class Render(Strict):
     accel: Literal["grid", "kdtree"] = "grid"
-    packet: Literal[4, 8, 16, 32] = 32
+    packet: int = 32           # one of raycore.config.PACKET_SIZES
     shadows: bool = True
     spp: Annotated[int, Field(ge=1, le=1024)] = 1
     background: Vec3 = (0.0, 0.0, 0.0)
     ambient: Annotated[float, Field(ge=0)] = 0.03
     grid_density: Annotated[float, Field(gt=0, le=64)] = 0.25
+
+    @field_validator("packet")
+    @classmethod
+    def _packet(cls, v):
+        if v not in PACKET_SIZES:
+            raise ValueError(f"packet {v}: one of {', '.join(map(str, PACKET_SIZES))}")
+        return v
 
 
 class Light(Strict):

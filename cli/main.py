@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from anim.errors import SceneError
+from raycore.config import PACKET_SIZES
 
 
 class Terminated(KeyboardInterrupt):
@@ -164,7 +165,7 @@ def parse_frames(text, scene):
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
 @click.option("--accel", type=click.Choice(["grid", "kdtree"]), help="Acceleration structure: the per-frame uniform grid, or an SAH kd-tree with frustum traversal (default: render.accel, grid).")
-@click.option("--packet", type=click.Choice(["4", "8", "16", "32"]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree always uses 8x8.")
+@click.option("--packet", type=click.Choice([str(p) for p in PACKET_SIZES]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree always uses 8x8.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
@@ -306,7 +307,7 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
             raise click.UsageError(f"--peers: none of {', '.join(PEER_NAMES)} imports here; "
                                    "pip install 'frustrace[peers]'")
         click.echo(f"peers: {', '.join(p.name for p in peer_list)}", err=True)
-    rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", (4, 8, 16, 32)), n_threads, accels,
+    rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", PACKET_SIZES), n_threads, accels,
                      peer_list)
     bench_table(rows)
     if plot_path:

@@ -1,5 +1,14 @@
-"""Render configuration and the numerical tolerances, in one documented place."""
+"""Render configuration, the numerical tolerances and the shared constants,
+in one documented place (as trimesh.constants.tol): every margin the
+kernels use is here with the reason for its size."""
 from dataclasses import dataclass
+
+import numpy as np
+
+# Packet sizes ------------------------------------------------------------
+# N for the grid's NxN camera packets; the scene schema, the command line and
+# the kernels take exactly these (sub-packets are 8x8 or the whole packet)
+PACKET_SIZES = (4, 8, 16, 32)
 
 # Tolerances --------------------------------------------------------------
 # Triangle AABBs and traversal ranges are widened by this fraction of the grid
@@ -20,6 +29,17 @@ EPS_CULL_REL = 1e-5
 # planes of half-size 1e3 and 1e5 at 0 and 1 ulp, none from 2 on; 8 doubles
 # the margin of pbrt's bound, and stays below what a float32 scene resolves.
 EPS_OFFSET_ULPS = 8.0
+# A shadow ray to a point light is traced from the light and stops short of
+# it by this fraction of its length (t_min), so that a light placed on a
+# surface does not shadow itself; far below any feature a float32 scene has.
+SHADOW_T_MIN_FRACTION = np.float32(1e-6)
+# kd-tree single rays: a split plane met within this fraction of the node's
+# [t0, t1] range of its ends visits both children (rounding in (split - o) / d
+# must not skip the child a ray grazes).
+EPS_KD_SPLIT_REL = np.float32(1e-6)
+# kd-tree root box: widened by this fraction of its largest |coordinate| so
+# that triangles lying on the box faces are inside it after rounding.
+EPS_KD_BOX_REL = np.float32(1e-6)
 
 
 @dataclass(frozen=True)

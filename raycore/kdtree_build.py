@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import kernel
+from .config import EPS_KD_BOX_REL
 
 N_BINS = 32
 C_TRAVERSE = np.float32(1.0)
@@ -256,7 +257,7 @@ def build_kdtree(tri_verts: np.ndarray, max_depth: int = 0, c_traverse=C_TRAVERS
         hi = boxes[finite, 3:].max(axis=0)
     else:
         lo, hi = np.zeros(3, np.float32), np.ones(3, np.float32)
-    pad = np.float32(1e-6) * (np.abs(np.concatenate([lo, hi])).max() + np.float32(1e-30))
+    pad = EPS_KD_BOX_REL * (np.abs(np.concatenate([lo, hi])).max() + np.float32(1e-30))
     lo, hi = (lo - pad).astype(np.float32), (hi + pad).astype(np.float32)
     if max_depth <= 0:
         max_depth = int(8 + 1.3 * np.log2(max(n, 1)))

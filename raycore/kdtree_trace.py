@@ -27,6 +27,7 @@ from numba import prange
 
 from ._jit import fetch_add, helper, kernel, parallel_kernel
 from .camera import primary_dir_raw
+from .config import EPS_KD_SPLIT_REL
 from .kdtree_build import LEAF, KdTree
 from .triangle import ray_axes, woop_test
 
@@ -34,7 +35,6 @@ F0 = np.float32(0.0)
 F1 = np.float32(1.0)
 INF = np.float32(np.inf)
 STACK = 128
-TOL = np.float32(1e-6)            # relative margin of the single-ray node decisions
 N_KD_COUNTERS = 5                 # packets, nodes visited, tests, leaves, single rays
 
 
@@ -86,7 +86,7 @@ def trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_v
                 node = near
                 continue
             t = (sp - o[a]) / d[a]
-            tol = TOL * (abs(t0) + abs(t1))
+            tol = EPS_KD_SPLIT_REL * (abs(t0) + abs(t1))
             if t <= F0 or t > t1 + tol:
                 node = near
             elif t < t0 - tol:

@@ -31,14 +31,11 @@ import numpy as np
 from numba import prange
 
 from ._jit import fetch_add, kernel, parallel_arith_kernel, parallel_kernel
-from .config import EPS_OFFSET_ULPS
+from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .grid_cgt import DX, DY, DZ, F0, F1, INF, OX, OY, OZ, TMAX, TMIN
 from .tiles import _scratch, trace_or_fallback
 from .workspace import scratch
 
-# a shadow ray to a point light stops this fraction of its length short of
-# the light, so a light placed on a surface does not shadow itself
-SHADOW_T_MIN_FRACTION = np.float32(1e-6)
 ULP = np.float32(2.0 ** -24)
 # rays per packet side: 32x32 rays = sixteen 8x8 sub-packets culled apart (8: 2.2x,
 # 16: 1.3x the time on the hand scene)

@@ -4,14 +4,13 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .config import EPS_CULL_REL
+from .config import EPS_CULL_REL, PACKET_SIZES
 from .grid_build import Grid
 from .grid_cgt import N_COUNTERS
 from .shadow_packets import SHADOW_PACKET, LightRays, trace_ordered
 from .surface import Surface, visible_surface
 from .tiles import swizzle_offsets, tile_size_for, trace_primary, trace_ray_batch, unswizzle
 
-PACKET_SIZES = (4, 8, 16, 32)
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
 # tests by a third but ran 2.5x slower (per-loop overhead); 8x8 measured best.
 SUB = 8

@@ -286,3 +286,9 @@ def test_a_keyframe_obj_with_an_extra_vertex_line_is_named(tmp_path):
     (tmp_path / "tube_001.obj").write_text("".join(lines))
     res = run("check", path)
     assert res.exit_code == 2 and "keyframes.1.mesh" in res.output and "line by line" in res.output, res.output
+
+
+def test_a_packet_size_the_kernels_do_not_take_is_named(tmp_path):
+    path = scene_with(tmp_path, BALL, extra="render: {packet: 12}")
+    res = run("check", path)
+    assert res.exit_code == 2 and "render.packet" in res.output and "4, 8, 16, 32" in res.output, res.output
