@@ -30,10 +30,9 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._jit import fetch_add, kernel, parallel_arith_kernel, parallel_kernel
+from ._jit import kernel, parallel_arith_kernel, parallel_kernel
 from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
-from .grid_cgt import DX, DY, DZ, F0, F1, INF, OX, OY, OZ, TMAX, TMIN
-from .tiles import _scratch, trace_or_fallback
+from .grid_cgt import F0, F1, INF
 from .workspace import scratch
 
 ULP = np.float32(2.0 ** -24)
@@ -177,48 +176,6 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, order):
                 order[hist[c, k]] = i
                 hist[c, k] += 1
     return total
-
-
-@parallel_kernel
-def trace_ordered(order, n_rays, ray_o, ray_d, t_min, t_max, shared_origin, packet, sub_size,
-                  n_workers, g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                  tri_verts, eps, out_vis, counters, cull):
-    """Any-hit rays order[0:n_rays] in packets of packet^2 consecutive rays,
-    pulled from a shared counter; out_vis[i] = 1 for each unoccluded ray i
-    (the caller zeroes it). counters: (n_packets, N_COUNTERS) int64."""
-    ss = sub_size * sub_size
-    n_sub = packet * packet // ss
-    per_packet = n_sub * ss
-    n_packets = (n_rays + per_packet - 1) // per_packet
-    next_packet = np.zeros(1, np.int64)
-    for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
-            _scratch(packet, sub_size)
-        while True:
-            pk = fetch_add(next_packet, 0, 1)
-            if pk >= n_packets:
-                break
-            for j in range(n_sub):
-                for r in range(ss):
-                    s = pk * per_packet + j * ss + r
-                    i = order[min(s, n_rays - 1)]
-                    rays[OX, j, r] = ray_o[0, i]
-                    rays[OY, j, r] = ray_o[1, i]
-                    rays[OZ, j, r] = ray_o[2, i]
-                    rays[DX, j, r] = ray_d[0, i]
-                    rays[DY, j, r] = ray_d[1, i]
-                    rays[DZ, j, r] = ray_d[2, i]
-                    rays[TMIN, j, r] = t_min[i]
-                    rays[TMAX, j, r] = t_max[i] if s < n_rays else -F1
-            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, True, shared_origin,
-                              sub, sub_active, sub_done, sub_skip, mailbox,
-                              g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                              tri_verts, eps, counters, pk, cull)
-            for j in range(n_sub):
-                for r in range(ss):
-                    s = pk * per_packet + j * ss + r
-                    if s < n_rays and hit_prim[j, r] < 0:
-                        out_vis[order[s]] = F1
 
 
 class LightRays:

@@ -7,9 +7,11 @@ import numpy as np
 from .config import EPS_CULL_REL, PACKET_SIZES
 from .grid_build import Grid
 from .grid_cgt import N_COUNTERS
-from .shadow_packets import SHADOW_PACKET, LightRays, trace_ordered
+from .grid_drivers import trace_ordered, trace_primary, trace_ray_batch
+from .packet_layout import swizzle_offsets, unswizzle
+from .shadow_packets import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
-from .tiles import swizzle_offsets, tile_size_for, trace_primary, trace_ray_batch, unswizzle
+from .tile_queue import tile_size_for
 
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
 # tests by a third but ran 2.5x slower (per-loop overhead); 8x8 measured best.
@@ -165,7 +167,9 @@ def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, pac
     out_b1 = np.empty(n, np.float32)
     out_b2 = np.empty(n, np.float32)
     counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
-    trace_ray_batch(origins, dirs, t_min, t_max, packet, sub, threads, any_hit,
+    order = np.arange(n, dtype=np.int32)
+    trace_ray_batch(order, n, np.ascontiguousarray(origins.T), np.ascontiguousarray(dirs.T), t_min, t_max,
+                    packet, sub, threads, any_hit,
                     *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
                     out_t, out_prim, out_b1, out_b2, counters, True)
     return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))
