@@ -158,8 +158,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     if not single:
         rgba.fill(0.0)
         z.fill(np.inf)
-    aov_n = aov_p = first_prim = None
-    for pass_index, jitter in enumerate(offsets):
+    aovs = NearestAOVs(cfg.aovs, W * H) if cfg.aovs else None
+    for jitter in offsets:
         t0 = time.perf_counter()
         hits, layout = accel.trace_camera(cam, W, H, jitter)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
@@ -201,32 +201,44 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                       surface.shininess, shading.lights, vis, cast_shadows, np.float32(cfg.ambient), rgb)
         write_pixels(surface.pixel, rgb, surface.depth, bg, np.float32(1.0 / len(offsets)),
                      not single, rgba, z)
-        if pass_index == 0:
-            aov_n, aov_p, first_prim = _first_pass_aovs(cfg.aovs, surface, W * H)
+        if aovs is not None:
+            aovs.add(surface)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
-    aovs = {}
-    if "N" in cfg.aovs:
-        for i, c in enumerate("XYZ"):
-            aovs[f"N.{c}"] = aov_n[:, i].reshape(H, W)
-    if "P" in cfg.aovs:
-        for i, c in enumerate("XYZ"):
-            aovs[f"P.{c}"] = aov_p[:, i].reshape(H, W)
-    if "id" in cfg.aovs:
-        aovs["id"] = first_prim.reshape(H, W)
-    return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs, timings, counters)
+    return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs.channels(H, W) if aovs else {},
+                       timings, counters)
 
 
-def _first_pass_aovs(names, surface, n_pix):
-    """N, P and id of the first sample of every pixel (0, 0 and -1 on a miss);
-    only those asked for."""
-    aov_n = aov_p = prim = None
-    if "N" in names:
-        aov_n = np.zeros((n_pix, 3), np.float32)
-        aov_n[surface.pixel] = surface.smooth_n.T
-    if "P" in names:
-        aov_p = np.zeros((n_pix, 3), np.float32)
-        aov_p[surface.pixel] = surface.point.T
-    if "id" in names:
-        prim = np.full(n_pix, -1.0, np.float32)
-        prim[surface.pixel] = surface.prim
-    return aov_n, aov_p, prim
+class NearestAOVs:
+    """N, P and id of each pixel's nearest hit among its samples: the sample
+    whose depth Z reports, so that the AOVs agree with Z (and with A > 0)
+    at partly covered edge pixels. 0, 0 and -1 where no sample hit. Only the
+    AOVs asked for are kept."""
+
+    def __init__(self, names, n_pix):
+        self.names = names
+        self.depth = np.full(n_pix, np.inf, np.float32)
+        self.n = np.zeros((n_pix, 3), np.float32) if "N" in names else None
+        self.p = np.zeros((n_pix, 3), np.float32) if "P" in names else None
+        self.prim = np.full(n_pix, -1.0, np.float32) if "id" in names else None
+
+    def add(self, surface):
+        """Take this pass's samples that are nearer than what each pixel has."""
+        nearer = surface.depth < self.depth[surface.pixel]
+        pix = surface.pixel[nearer]
+        self.depth[pix] = surface.depth[nearer]
+        if self.n is not None:
+            self.n[pix] = surface.smooth_n[:, nearer].T
+        if self.p is not None:
+            self.p[pix] = surface.point[:, nearer].T
+        if self.prim is not None:
+            self.prim[pix] = surface.prim[nearer]
+
+    def channels(self, height, width):
+        out = {}
+        for name, values in (("N", self.n), ("P", self.p)):
+            if values is not None:
+                for i, c in enumerate("XYZ"):
+                    out[f"{name}.{c}"] = values[:, i].reshape(height, width)
+        if self.prim is not None:
+            out["id"] = self.prim.reshape(height, width)
+        return out

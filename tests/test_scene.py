@@ -171,3 +171,27 @@ def test_the_spec_example_still_validates():
     from anim.schema import SceneFile
     spec = SceneFile.model_validate(yaml.safe_load(SPEC_EXAMPLE))
     assert spec.objects[0].interpolation == "catmull-rom" and spec.objects[1].transform.rotation is not None
+
+
+def test_aovs_of_a_multisample_pixel_are_its_nearest_hit(tmp_path):
+    """With spp > 1, id, N and P come from the sample whose depth Z reports:
+    every pixel with coverage A > 0 has an id, a unit normal and a position
+    at depth Z; an uncovered pixel has id -1 and zeros."""
+    path = scene_with(tmp_path, "  - {name: ball, mesh: ball.obj}\n  - {name: floor, mesh: floor.obj}")
+    scene = AnimatedScene(path)
+    w, h = scene.spec.output.resolution
+    cfg = RenderConfig(width=w, height=h, spp=4, aovs=("N", "P", "id"))
+    out = SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)[1]
+    a, z = out.rgba[..., 3], out.z
+    covered = a > 0
+    assert ((a > 0) & (a < 1)).sum() > 10                  # partly covered edge pixels exist
+    assert np.all(out.aovs["id"][covered] >= 0) and np.all(out.aovs["id"][~covered] == -1)
+    n = np.stack([out.aovs[f"N.{c}"] for c in "XYZ"], -1)
+    np.testing.assert_allclose(np.linalg.norm(n[covered], axis=-1), 1, atol=1e-4)
+    assert np.all(n[~covered] == 0)
+    p = np.stack([out.aovs[f"P.{c}"] for c in "XYZ"], -1)
+    from raycore.camera import camera_basis
+    eye, look_at, up, fov = scene.camera_at(0.0)
+    cam = camera_basis(eye, look_at, up, fov, w, h)
+    depth = (p - cam[:3]) @ cam[3:6]                       # P's distance along the view axis
+    np.testing.assert_allclose(depth[covered], z[covered], rtol=1e-4)
