@@ -17,7 +17,7 @@ import pygltflib
 
 from .errors import SceneError
 from .interpolate import wrap_time
-from .track_kernels import quat_to_matrix
+from .track_kernels import quat_to_matrix, slerp_into
 from .vertex_kernels import skin_into, transform_into
 
 _DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -33,17 +33,11 @@ def _quat_matrix(q):
 
 
 def slerp(q0, q1, s):
-    """Shortest-arc slerp of unit quaternions; nearly equal keys fall back to a
-    normalised lerp (no division by sin(angle) ~ 0)."""
-    d = float(np.dot(q0, q1))
-    if d < 0:
-        q1, d = -q1, -d
-    if d > 1 - 1e-10:
-        q = q0 + s * (q1 - q0)
-    else:
-        a = np.arccos(min(d, 1.0))
-        q = (np.sin((1 - s) * a) * q0 + np.sin(s * a) * q1) / np.sin(a)
-    return q / np.linalg.norm(q)
+    """Shortest-arc slerp of unit quaternions (track_kernels.slerp_into, the
+    one every rotation track uses)."""
+    out = np.empty(4, np.float64)
+    slerp_into(np.asarray(q0, np.float64), np.asarray(q1, np.float64), float(s), out)
+    return out
 
 
 class _Sampler:

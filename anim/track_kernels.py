@@ -72,25 +72,31 @@ def eval_slerp(t, times, quats, key_start, loop, out):
             out[o] = quats[b - 1]
             continue
         h = times[a + k + 1] - times[a + k]
-        u = s / h
-        q0, q1 = quats[a + k], quats[a + k + 1]
-        d = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
-        sign = 1.0
-        if d < 0.0:
-            sign, d = -1.0, -d
-        if d > 1.0 - 1e-10:                       # nearly equal: normalised lerp
-            w0, w1 = 1.0 - u, u * sign
-        else:
-            ang = np.arccos(min(d, 1.0))
-            w0 = np.sin((1.0 - u) * ang) / np.sin(ang)
-            w1 = sign * np.sin(u * ang) / np.sin(ang)
-        n = 0.0
-        for i in range(4):
-            out[o, i] = w0 * q0[i] + w1 * q1[i]
-            n += out[o, i] * out[o, i]
-        n = np.sqrt(n)
-        for i in range(4):
-            out[o, i] /= n
+        slerp_into(quats[a + k], quats[a + k + 1], s / h, out[o])
+
+
+@kernel
+def slerp_into(q0, q1, u, out):
+    """The one slerp of unit quaternions (any component order): out = the
+    shortest-arc interpolation at u in [0, 1], unit length. Nearly equal keys
+    fall back to a normalised lerp (no division by sin(angle) ~ 0)."""
+    d = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+    sign = 1.0
+    if d < 0.0:
+        sign, d = -1.0, -d
+    if d > 1.0 - 1e-10:
+        w0, w1 = 1.0 - u, u * sign
+    else:
+        ang = np.arccos(min(d, 1.0))
+        w0 = np.sin((1.0 - u) * ang) / np.sin(ang)
+        w1 = sign * np.sin(u * ang) / np.sin(ang)
+    n = 0.0
+    for i in range(4):
+        out[i] = w0 * q0[i] + w1 * q1[i]
+        n += out[i] * out[i]
+    n = np.sqrt(n)
+    for i in range(4):
+        out[i] /= n
 
 
 @kernel

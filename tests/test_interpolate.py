@@ -124,3 +124,20 @@ def test_rotation_spline_converges_faster_than_slerp():
     slerp_order = np.log2(errs["slerp"][-2] / errs["slerp"][-1])
     spline_order = np.log2(errs["spline"][-2] / errs["spline"][-1])
     assert 1.7 < slerp_order < 2.3 and spline_order > 2.7, (errs, slerp_order, spline_order)
+
+
+def test_the_one_slerp_matches_scipy_on_random_and_antipodal_pairs():
+    from scipy.spatial.transform import Rotation, Slerp
+    from anim.track_kernels import slerp_into
+    rng = np.random.default_rng(3)
+    q = Rotation.random(200, random_state=4).as_quat()[:, [3, 0, 1, 2]]       # w, x, y, z
+    out = np.empty(4)
+    for i in range(0, 200, 2):
+        q0, q1 = q[i], q[i + 1] * (-1 if i % 4 == 0 else 1)                  # half of them antipodal keys
+        ref = Slerp([0, 1], Rotation.from_quat(np.stack([q0, q1])[:, [1, 2, 3, 0]]))
+        for u in (0.0, 0.3, 0.5, 1.0, rng.random()):
+            slerp_into(q0, q1, u, out)
+            np.testing.assert_allclose(Rotation.from_quat(out[[1, 2, 3, 0]]).as_matrix(),
+                                       ref(u).as_matrix(), atol=1e-9)
+    slerp_into(q[0], q[0] * (1 + 1e-13), 0.5, out)                            # nearly equal keys
+    np.testing.assert_allclose(out, q[0], atol=1e-12)
