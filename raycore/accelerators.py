@@ -4,7 +4,7 @@ arguments and the same results, so that the frame (frame.py) picks its
 structure once and never asks which one it has.
 
   GridAccel  the per-frame uniform grid: camera packets by Coherent Grid
-             Traversal (tiles.py), shadow rays in light-space packets
+             Traversal (grid_drivers.py), shadow rays in light-space packets
              (shadow_packets.py), ray batches in packets;
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
              shadow rays and batches one by one (kdtree_trace.py).

@@ -20,7 +20,7 @@ from surface points do not), since only the affine bounds are used.
 
 A packet is traced in two steps: a set-up fills the per-ray `work` rows and
 the frustum bounds (`setup_rays` for rays with any origins, or the camera's
-corner-ray set-up in tiles.py), then `walk` traverses the grid.
+corner-ray set-up in camera_packets.py), then `walk` traverses the grid.
 
 Ray packets are SoA float32 arrays shaped (row, sub-packet j, ray r): every
 loop indexes them with loop counters that start at 0, which lets LLVM drop
