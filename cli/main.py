@@ -169,8 +169,9 @@ def parse_frames(text, scene):
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
-@click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames).")
-@click.option("--resume", is_flag=True, help="Skip frames whose file already exists.")
+@click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames); merged with an earlier run's by frame number.")
+@click.option("--resume", is_flag=True, help="Skip frames already written whole (a truncated or foreign file is rendered again); "
+                                            "--resume renders into one directory share the frames.")
 @click.option("--overwrite", is_flag=True, help="Replace frames that already exist.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary table.")
 @click.option("--res", callback=lambda ctx, param, v: _resolution(v), metavar="WxH",
