@@ -11,6 +11,7 @@ import numpy as np
 import yaml
 from pydantic import ValidationError
 
+from .area_lights import emitter_positions
 from .errors import SceneError
 from .gltf import GltfObject
 from .interpolate import Curve
@@ -363,13 +364,20 @@ class AnimatedScene:
 
     @property
     def light_table(self):
+        """(n, 8) f32 rows for raycore/shade.py: kind (0 point, 1 directional),
+        position or direction, colour x intensity; an area light gives one
+        point row per emitter, each with 1/samples of its intensity."""
         rows = []
         for light in self.spec.lights:
+            color = np.asarray(light.color) * light.intensity
+            if light.type == "area":
+                for p in emitter_positions(light):
+                    rows.append([0.0, *p, *(color / light.samples), 0.0])
+                continue
             vec = light.position if light.type == "point" else light.direction
             if light.type == "directional":
                 n = np.linalg.norm(vec)
                 vec = tuple(np.asarray(vec) / n) if n > 0 else vec
-            color = np.asarray(light.color) * light.intensity
             rows.append([0.0 if light.type == "point" else 1.0, *vec, *color, 0.0])
         return np.asarray(rows, np.float32).reshape(-1, 8)
 

@@ -111,20 +111,37 @@ class Render(Strict):
 
 
 class Light(Strict):
-    type: Literal["point", "directional"] = "point"
+    """point: at `position`; directional: travelling along `direction`;
+    area: a rectangle (`corner`, `edge_u`, `edge_v`) or a sphere (`center`,
+    `radius`) of `samples` isotropic point emitters sharing `intensity`
+    (anim/area_lights.py): soft shadows, and a point light in the limit of
+    zero size."""
+    type: Literal["point", "directional", "area"] = "point"
     position: Optional[Vec3] = None
     direction: Optional[Vec3] = None
+    corner: Optional[Vec3] = None
+    edge_u: Optional[Vec3] = None
+    edge_v: Optional[Vec3] = None
+    center: Optional[Vec3] = None
+    radius: Optional[Annotated[float, Field(ge=0, le=1e37)]] = None
+    samples: Annotated[int, Field(ge=1, le=4096)] = 16
     color: Vec3 = (1.0, 1.0, 1.0)
     intensity: Annotated[float, Field(ge=0)] = 1.0
 
     @model_validator(mode="after")
     def _placed(self):
-        if self.type == "point" and self.position is None:
-            raise ValueError("a point light needs a position")
-        if self.type == "directional" and self.direction is None:
-            raise ValueError("a directional light needs a direction")
+        given = {k for k in ("position", "direction", "corner", "edge_u", "edge_v", "center", "radius")
+                 if getattr(self, k) is not None}
+        needs = {"point": [{"position"}], "directional": [{"direction"}],
+                 "area": [{"corner", "edge_u", "edge_v"}, {"center", "radius"}]}[self.type]
+        if given not in needs:
+            shapes = " or ".join(", ".join(sorted(n)) for n in needs)
+            raise ValueError(f"a{'n' if self.type == 'area' else ''} {self.type} light takes {shapes}"
+                             + (f"; got {', '.join(sorted(given)) or 'none'}" if given else ""))
         if self.type == "directional" and not any(self.direction):
             raise ValueError("direction [0, 0, 0] points nowhere")
+        if "samples" in self.model_fields_set and self.type != "area":
+            raise ValueError("samples is for area lights")
         return self
 
 

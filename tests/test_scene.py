@@ -146,6 +146,8 @@ camera: {eye: [0, 1.5, 6], look_at: [0, 0.8, 0], up: [0, 1, 0], fov: 40}
 render: {accel: grid, packet: 8, shadows: true, spp: 1, background: [0.02, 0.02, 0.03]}
 lights:
   - {type: point, position: [4, 6, 5], color: [1, 1, 1], intensity: 60}
+  - {type: area, corner: [-1, 5, -1], edge_u: [2, 0, 0], edge_v: [0, 0, 2],   # rectangle
+     color: [1, 1, 1], intensity: 60, samples: 16}                           # soft shadows
 materials:
   skin: {diffuse: [0.8, 0.6, 0.5], specular: 0.1, shininess: 32, texture: skin.png}
 objects:

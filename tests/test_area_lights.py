@@ -1,0 +1,102 @@
+"""Area lights (anim/area_lights.py): emitters spread over a rectangle or a
+sphere, soft shadows, the point light as the zero-size limit, and
+convergence of the unshadowed irradiance to the integral over the light."""
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from anim.area_lights import emitter_positions, hammersley
+from anim.scene import AnimatedScene
+from cli.main import main
+from cli.pipeline import SceneRenderer, config_of, shading_of
+from test_scene import scene_with
+
+FLOOR_AND_BALL = ("  - {name: floor, mesh: floor.obj}\n"
+                  "  - {name: ball, mesh: ball.obj, transform: {translation: {keys: [[0, 0, 0.8, 0]]}}}\n")
+CAMERA = "camera: {eye: [0, 4, 5], look_at: [0, -0.5, 0], fov: 50}"
+POINT = "lights: [{type: point, position: [3, 5, 4], intensity: 30}]"
+
+
+def render(tmp_path, lights, size=(64, 48), shadows=True):
+    path = scene_with(tmp_path, FLOOR_AND_BALL, camera_yaml=CAMERA)
+    path.write_text(path.read_text().replace(POINT, lights))
+    scene = AnimatedScene(path)
+    cfg = config_of(scene, width=size[0], height=size[1], aovs=(), ambient=0.0, shadows=shadows)
+    return SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)[1].rgba
+
+
+def test_a_tiny_area_light_is_the_point_light(tmp_path):
+    point = render(tmp_path, "lights: [{type: point, position: [1, 4, 1], intensity: 30}]")
+    for shape in ("{corner: [1, 4, 1], edge_u: [1e-6, 0, 0], edge_v: [0, 0, 1e-6]}",
+                  "{center: [1, 4, 1], radius: 0}"):
+        area = render(tmp_path, f"lights: [{{type: area, intensity: 30, samples: 8, {shape[1:-1]}}}]")
+        np.testing.assert_allclose(area, point, rtol=1e-3, atol=1e-5)
+
+
+def test_an_area_light_casts_soft_shadows(tmp_path):
+    """The share of the light that reaches each floor pixel (shadowed over
+    unshadowed image, no ambient): 0 or 1 under a point light, in between
+    (a penumbra) around the ball's shadow under a 1x1 area light."""
+    def visible(lights):
+        on, off = (render(tmp_path, lights, (96, 72), shadows) for shadows in (True, False))
+        lit = off[..., 0] > 1e-4
+        return on[..., 0][lit] / off[..., 0][lit]
+    point = visible("lights: [{type: point, position: [1.5, 2.5, 0], intensity: 30}]")
+    area = visible("lights: [{type: area, corner: [1, 2.5, -0.5], edge_u: [1, 0, 0], edge_v: [0, 0, 1], "
+                   "intensity: 30, samples: 64}]")
+    partial = lambda v: int(((v > 0.05) & (v < 0.95)).sum())
+    assert partial(point) <= 2 and (point < 0.05).sum() > 20          # a hard shadow
+    assert partial(area) > 40, partial(area)                           # a penumbra
+
+
+def test_unshadowed_irradiance_converges_to_the_integral_over_the_light():
+    """The emitter sum of one rectangle light at a point below it, against a
+    dense midpoint quadrature of the same isotropic emission: the error
+    falls as the emitters grow in number and is below 0.5% at 256."""
+    class Rect:
+        corner, edge_u, edge_v = (-1.0, 2.0, -0.5), (2.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    x = np.array([0.3, 0.0, 0.2])
+    n = np.array([0.0, 1.0, 0.0])
+
+    def irradiance(points):
+        to = points - x
+        d2 = np.einsum("ij,ij->i", to, to)
+        return np.mean(np.maximum(to @ n, 0) / np.sqrt(d2) / d2)
+    g = (np.arange(2000) + 0.5) / 2000
+    uu, vv = np.meshgrid(g, g)
+    dense = np.asarray(Rect.corner) + uu.reshape(-1, 1) * Rect.edge_u + vv.reshape(-1, 1) * Rect.edge_v
+    exact = irradiance(dense)
+    errors = []
+    for samples in (4, 16, 64, 256):
+        Rect.samples = samples
+        errors.append(abs(irradiance(emitter_positions(Rect)) / exact - 1))
+    assert errors[-1] < 5e-3 and errors[-1] < errors[0], errors
+
+
+def test_hammersley_points_are_stratified():
+    pts = hammersley(16)
+    assert np.all((pts >= 0) & (pts < 1))
+    assert sorted(np.floor(pts[:, 0] * 16).astype(int)) == list(range(16))
+    assert sorted(np.floor(pts[:, 1] * 16).astype(int)) == list(range(16))
+
+
+def test_a_sphere_lights_emitters_lie_on_its_surface():
+    class Sphere:
+        corner = None
+        center, radius, samples = (1.0, 2.0, 3.0), 0.5, 64
+    p = emitter_positions(Sphere)
+    np.testing.assert_allclose(np.linalg.norm(p - Sphere.center, axis=1), 0.5)
+    assert np.abs(p.mean(axis=0) - Sphere.center).max() < 0.05
+
+
+@pytest.mark.parametrize("light, words", [
+    ("{type: area, corner: [0, 1, 0], edge_u: [1, 0, 0]}", ["corner, edge_u, edge_v", "center, radius"]),
+    ("{type: area, center: [0, 1, 0], radius: 1, corner: [0, 0, 0], edge_u: [1, 0, 0], edge_v: [0, 0, 1]}",
+     ["takes"]),
+    ("{type: point, position: [0, 1, 0], samples: 4}", ["samples is for area lights"]),
+])
+def test_area_light_mistakes_are_named(tmp_path, light, words):
+    path = scene_with(tmp_path, FLOOR_AND_BALL)
+    path.write_text(path.read_text().replace(POINT, f"lights: [{light}]"))
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "lights.0" in res.output and all(w in res.output for w in words), res.output
