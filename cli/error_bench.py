@@ -1,6 +1,8 @@
 """`frustrace bench --error`: interpolation error against run time on the
 built-in scenes that know their exact motion, plus the bouncing-ball stiff
-case. Prints tables, writes one JSON and one plot (log-log)."""
+case, and the image's own error against run time (image_error.py: samples
+per pixel, area-light samples). Prints tables, writes one JSON and one plot
+(log-log)."""
 import json
 import platform
 import tempfile
@@ -14,6 +16,7 @@ from anim import builtin
 from anim.error_report import bounce_overshoot, measure
 from anim.scene import AnimatedScene
 
+from .image_error import run_image_study
 from .report import Console
 
 FPS = 24.0     # frames per second used to amortise fitting over a period
@@ -61,7 +64,7 @@ def run_error_report(names):
         result["shipped"] = shipped_error(gen)
         scenes[name] = result
     return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
-            "bounce": bounce_overshoot()}
+            "bounce": bounce_overshoot(), "image": run_image_study(names)}
 
 
 def print_report(report):
@@ -95,6 +98,20 @@ def print_report(report):
         table.add_row(m, *(f"{by[m, d]['min_height']:+.1e}" for d in densities),
                       *(f"{by[m, d]['max_err']:.1e}" for d in densities))
     console.print(table)
+    image = report.get("image")
+    if image:
+        for study, knob in (("spp", "spp"), ("light_samples", "light_samples")):
+            for name, rows in image[study].items():
+                table = Table(title=f"{name}: image error vs {knob} ({image['resolution']}², against "
+                                    f"{image['ref_' + ('spp' if knob == 'spp' else 'light_samples')]}; "
+                                    f"slope of log RMSE vs log ms {image['slopes'][f'{name.split()[0]} ' + knob.replace('_', ' ')]:.2f})")
+                for col in (knob, "ms/frame", "RMSE", "max", "PSNR dB"):
+                    table.add_column(col, justify="right")
+                for r in rows:
+                    table.add_row(str(r[knob]), f"{r['ms']:.1f}", f"{r['rmse']:.2e}", f"{r['max']:.2e}",
+                                  f"{r['psnr']:.1f}")
+                console.print(table)
+        console.print("expected slopes: " + ", ".join(f"{k} {v}" for k, v in image["expected_slopes"].items()))
 
 
 def write_report(report, plot_path: Path, json_path: Path):
@@ -107,7 +124,7 @@ def write_report(report, plot_path: Path, json_path: Path):
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(report, indent=1))
     plot_path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
+    fig, axes = plt.subplots(1, 4, figsize=(21, 5))
     for name, res in report["scenes"].items():
         for method in res["orders"]:
             rows = [r for r in res["rows"] if r["method"] == method]
@@ -132,6 +149,16 @@ def write_report(report, plot_path: Path, json_path: Path):
     axes[2].set_xticks([j + 0.4 - width / 2 for j in range(len(methods))], methods, rotation=45)
     axes[2].set(ylabel="lowest height (floor at 0)", title="bounce: through the floor?")
     axes[2].legend(fontsize=7)
+    image = report.get("image") or {}
+    for study, knob in (("spp", "spp"), ("light_samples", "light samples")):
+        for name, rows in image.get(study, {}).items():
+            key = f"{name.split()[0]} {knob}"
+            axes[3].loglog([r["ms"] for r in rows], [r["rmse"] for r in rows], "o-",
+                           label=f"{name}: {knob} (slope {image['slopes'][key]:.2f})")
+    axes[3].set(xlabel="ms per frame (expected slopes: -0.5 random, -0.75 stratified)",
+                ylabel="image RMSE (linear RGB)", title="image error vs run time")
+    if image:
+        axes[3].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(plot_path, dpi=110)
     plt.close(fig)

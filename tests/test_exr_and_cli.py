@@ -129,6 +129,11 @@ def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
     assert "order measured" in res.output and "bounce" in res.output
     pchip = [r for r in report["bounce"] if r["method"] == "pchip"]
     assert pchip and all(r["min_height"] >= 0 for r in pchip)
+    # the image's own error falls with samples per pixel, and the report says how fast
+    spp = report["image"]["spp"]["torus"]
+    assert [r["spp"] for r in spp] == [1, 2, 4, 8, 16, 32, 64]
+    assert spp[-1]["rmse"] < 0.5 * spp[2]["rmse"] and report["image"]["slopes"]["torus spp"] < -0.2
+    assert "image error vs spp" in res.output
 
 
 def test_render_with_the_kdtree(small_demo, tmp_path):
