@@ -17,6 +17,7 @@ from anim.error_report import bounce_overshoot, measure
 from anim.scene import AnimatedScene
 
 from .image_error import run_image_study
+from .precision import precision_study
 from .report import Console
 
 FPS = 24.0     # frames per second used to amortise fitting over a period
@@ -64,7 +65,21 @@ def run_error_report(names):
         result["shipped"] = shipped_error(gen)
         scenes[name] = result
     return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
-            "bounce": bounce_overshoot(), "image": run_image_study(names)}
+            "bounce": bounce_overshoot(), "image": run_image_study(names),
+            "precision": run_precision_study(names)}
+
+
+def run_precision_study(names):
+    """precision.py's table for the first built-in scene named, at the frame
+    the image study renders."""
+    for name in names:
+        if name in builtin.ALL:
+            with tempfile.TemporaryDirectory() as tmp:
+                scene = AnimatedScene(builtin.get(name).write(Path(tmp) / name))
+            t = scene.time_of(scene.frame_numbers[len(scene.frame_numbers) // 3])
+            tv = scene.vertices_at(t).astype(np.float64)[scene.faces].reshape(-1, 9)
+            return {"scene": name, "rows": precision_study(tv, scene.camera_at(t))}
+    return None
 
 
 def print_report(report):
@@ -112,6 +127,16 @@ def print_report(report):
                                   f"{r['psnr']:.1f}")
                 console.print(table)
         console.print("expected slopes: " + ", ".join(f"{k} {v}" for k, v in image["expected_slopes"].items()))
+    precision = report.get("precision")
+    if precision:
+        table = Table(title=f"{precision['scene']}: float32 hit distance against a float64 brute force, "
+                            "scene scaled and moved (relative error; pixels whose hit or miss differs)")
+        for col in ("scale", "offset", "median rel", "99% rel", "hit/miss differs"):
+            table.add_column(col, justify="right")
+        for r in precision["rows"]:
+            rel = [f"{r[k]:.1e}" if r[k] is not None else "no common hit" for k in ("median_rel", "p99_rel")]
+            table.add_row(f"{r['scale']:g}", f"{r['offset']:g}", *rel, f"{100 * r['hit_mismatch']:.2f}%")
+        console.print(table)
 
 
 def write_report(report, plot_path: Path, json_path: Path):

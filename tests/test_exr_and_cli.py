@@ -134,6 +134,10 @@ def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
     assert [r["spp"] for r in spp] == [1, 2, 4, 8, 16, 32, 64]
     assert spp[-1]["rmse"] < 0.5 * spp[2]["rmse"] and report["image"]["slopes"]["torus spp"] < -0.2
     assert "image error vs spp" in res.output
+    # float32 precision: scale-free when the scene sits at the origin, breaking up far from it
+    rows = {(r["scale"], r["offset"]): r for r in report["precision"]["rows"]}
+    assert all(rows[s, 0.0]["median_rel"] < 1e-6 and rows[s, 0.0]["hit_mismatch"] == 0 for s in (1e-4, 1.0, 1e4))
+    assert rows[1e-4, 1e6]["hit_mismatch"] > 0.1 and rows[1.0, 1e6]["p99_rel"] > 1e-3
 
 
 def test_render_with_the_kdtree(small_demo, tmp_path):
