@@ -32,7 +32,7 @@ bench: $(STAMP)
 SCENES = hand runner toys marbles fairy
 previews: $(STAMP)
 	for s in $(SCENES); do \
-	  $(VENV)/bin/frustrace assets make $$s -o out/assets/$$s --preview assets/previews/$$s.png || exit 1; \
+	  $(VENV)/bin/frustrace assets make $$s -o out/assets/$$s --overwrite --preview assets/previews/$$s.png || exit 1; \
 	done
 
 clean:
