@@ -368,11 +368,11 @@ class AnimatedScene:
         position or direction, colour x intensity; an area light gives one
         point row per emitter, each with 1/samples of its intensity."""
         rows = []
-        for light in self.spec.lights:
+        for index, light in enumerate(self.spec.lights):
             color = np.asarray(light.color) * light.intensity
             if light.type == "area":
-                for p in emitter_positions(light):
-                    rows.append([0.0, *p, *(color / light.samples), 0.0])
+                for p in emitter_positions(light):      # column 7: the area light's group (frame.py)
+                    rows.append([0.0, *p, *(color / light.samples), float(index + 1)])
                 continue
             vec = light.position if light.type == "point" else light.direction
             if light.type == "directional":

@@ -101,6 +101,9 @@ class Render(Strict):
     background: Vec3 = (0.0, 0.0, 0.0)
     ambient: Annotated[float, Field(ge=0)] = 0.03
     grid_density: Annotated[float, Field(gt=0, le=64)] = 0.25
+    # area lights: trace this many emitters for every point first, and the
+    # rest only where they disagree (the penumbra); 0 = every emitter everywhere
+    light_probes: Annotated[int, Field(ge=0, le=4096)] = 0
 
     @field_validator("packet")
     @classmethod

@@ -52,6 +52,7 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
     base = dict(width=spec.output.resolution[0], height=spec.output.resolution[1],
                 packet=spec.render.packet, spp=spec.render.spp, shadows=spec.render.shadows,
                 accel=spec.render.accel, grid_density=spec.render.grid_density,
+                light_probes=spec.render.light_probes,
                 background=tuple(spec.render.background), ambient=spec.render.ambient,
                 aovs=tuple(spec.output.aovs))
     base.update({k: v for k, v in overrides.items() if v is not None})
@@ -344,6 +345,7 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             "interp_ms": interp_ms, **tm, "write_ms": 0.0,
             "tri_tests": float(result.counters["tri_tests"]),
             "shadow_rays": result.counters["shadow_rays"],
+            "shadow_rays_left_out": result.counters["shadow_rays_skipped"],   # facing away, dark, outside a penumbra
             "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
             "fallback_rays": result.counters["fallback_rays"],
             **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters

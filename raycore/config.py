@@ -56,3 +56,4 @@ class RenderConfig:
     ambient: float = 0.03          # constant ambient term so shadowed areas are not pure black
     aovs: tuple = ()               # extra EXR channels: "N", "P", "id"
     grid_cull: bool = True         # grid: frustum culling and mailboxes (off only to measure them)
+    light_probes: int = 0          # area lights: trace this many emitters first, the rest only in penumbrae (0 = all)

@@ -99,6 +99,31 @@ class FrameBuffers:
         return self.images[k]
 
 
+def light_groups(lights, lit):
+    """The lit rows of the light table in groups: one group per area light
+    (its emitter rows, column 7 = its group number > 0), one row alone else."""
+    groups, by_id = [], {}
+    for li in lit:
+        gid = int(lights[li, 7])
+        if gid > 0 and gid in by_id:
+            by_id[gid].append(li)
+        else:
+            groups.append([li])
+            if gid > 0:
+                by_id[gid] = groups[-1]
+    return groups
+
+
+def probe_rows(rows, n_probes):
+    """The emitters traced for every point first: the group's first n_probes
+    (its emitters follow a Halton sequence, whose every prefix spreads over
+    the whole light: anim/area_lights.py), or all of them when probing is
+    off or pointless."""
+    if n_probes <= 0 or n_probes >= len(rows):
+        return list(rows)
+    return list(rows[:n_probes])
+
+
 def _light_is_dark(light) -> bool:
     """A light of zero colour * intensity adds nothing: it costs no ray."""
     return not np.any(light[4:7] > 0)
@@ -185,14 +210,30 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
         if cast_shadows:
             vis[[li for li in range(n_lights) if li not in lit]] = 0.0
-            for li in lit:
+
+            def trace(li, skip=None):
                 rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
-                                 buffers.work)
+                                 buffers.work, skip)
                 c = accel.trace_shadows(rays, vis[li])
                 counters["shadow_rays"] += rays.n_active
                 counters["shadow_rays_skipped"] += n_vis - rays.n_active
                 counters["tri_tests"] += c.tests
                 counters["cells"] += c.visits
+            for rows in light_groups(shading.lights, lit):
+                probes = probe_rows(rows, cfg.light_probes)
+                for li in probes:
+                    trace(li)
+                rest = [li for li in rows if li not in probes]
+                if not rest:
+                    continue
+                # every probe lit, or none: the point is out of the penumbra, and
+                # the other emitters are taken to agree (no rays); else trace them
+                seen = vis[probes].sum(axis=0)
+                full, none = seen >= len(probes), seen <= 0
+                for li in rest:
+                    trace(li, full | none)
+                    vis[li][full] = 1.0
+                    vis[li][none] = 0.0
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
 
         t0 = time.perf_counter()

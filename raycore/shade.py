@@ -4,7 +4,8 @@ point and directional lights, visibility from the shadow pass.
 Arrays (all float32 unless noted):
   materials (n_mat, 8): kd r g b, ks, shininess, texture index (-1 none), -, -
   lights (n_light, 8): kind (0 point, 1 directional), x y z (position or the
-      direction the light travels), r g b (colour * intensity), -
+      direction the light travels), r g b (colour * intensity), group (an
+      area light's emitters share a number > 0, frame.light_groups; else 0)
 Point lights fall off with 1/d^2; directional lights do not.
 
 The loops run lights outside and samples inside, over contiguous

@@ -182,7 +182,8 @@ class LightRays:
     """One light's shadow rays for a Surface, in structure-of-arrays form
     (with a Workspace: reused buffers, valid until the next light's rays)."""
 
-    def __init__(self, surface, kind, light_vec, workspace=None):
+    def __init__(self, surface, kind, light_vec, workspace=None, skip=None):
+        """skip (n,) bool: samples that get no ray (their visibility is known)."""
         n = surface.mag.shape[0]
         f32 = np.float32
 
@@ -205,6 +206,8 @@ class LightRays:
         light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
                    surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction, self.t_min,
                    self.t_max, face, key_s, key_t)
+        if skip is not None:
+            self.t_max[skip] = -1.0
         self.order = take("order", n, np.int32)
         chunks = max(1, numba.get_num_threads())
         self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
