@@ -48,7 +48,9 @@ def accelerators(tv):
 
 
 def near_edge(b1, b2, eps=1e-4):
-    return np.minimum(np.minimum(b1, b2), 1 - b1 - b2) < eps
+    """Barycentrics within eps of an edge (a miss's are undefined: False)."""
+    with np.errstate(invalid="ignore"):
+        return np.minimum(np.minimum(b1, b2), 1 - b1 - b2) < eps
 
 
 def agree(got, want):
