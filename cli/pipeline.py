@@ -223,7 +223,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
     first_t = scene.time_of(todo[0][0] if todo else scene.frame_numbers[0])
     compile_s = warm_up(scene, shading, cfg, first_t) if todo else 0.0
     renderer = SceneRenderer(scene, cfg, shading) if todo else None
-    rows, claimed = [], []
+    rows, claimed = [], set()          # claimed: frames this run holds a claim on
 
     def write(path, result, row):
         t0 = time.perf_counter()
@@ -243,6 +243,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
         row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
         rows.append(row)                                      # in stats only once on disk
         release(path)
+        claimed.discard(path)      # released: a later claim on it is another render's
 
     wall0 = time.perf_counter()
     ended = "complete"
@@ -260,7 +261,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
                 if job.resume and path.exists() and path not in stale:
                     release(path)            # finished by another render since we planned
                     continue
-                claimed.append(path)
+                claimed.add(path)
                 t = scene.time_of(frame)
                 # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
                 # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
