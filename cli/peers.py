@@ -20,7 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from raycore.camera import camera_basis
+from raycore.camera import camera_basis, pixel_centre_rays
 
 # shadow rays start this fraction of the scene's extent off the surface,
 # along the geometric normal turned to the viewer (peers offer no error bounds)
@@ -30,14 +30,9 @@ OFFSET_FRACTION = 1e-4
 def camera_rays(pose, width, height):
     """Origins (n, 3) and unit directions (n, 3) f32 of the pixel-centre rays,
     row-major, as SPEC section 3 fixes them."""
-    cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, width, height).astype(np.float64)
-    x = (np.arange(width) + 0.5) * cam[14] - cam[12]
-    y = cam[13] - (np.arange(height) + 0.5) * cam[15]
-    u, v = np.meshgrid(x, y)
-    d = cam[3:6] + u[..., None] * cam[6:9] + v[..., None] * cam[9:12]
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    d = d.reshape(-1, 3).astype(np.float32)
-    return np.broadcast_to(cam[:3].astype(np.float32), d.shape).copy(), d
+    o, d = pixel_centre_rays(camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, width, height),
+                             width, height)
+    return o.astype(np.float32), d.astype(np.float32)
 
 
 def shadow_rays(points, normals, view, light, extent):

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 from raycore.accelerators import GridAccel
-from raycore.camera import camera_basis
+from raycore.camera import camera_basis, pixel_centre_rays
 from raycore.grid_build import build_grid
 
 SCALES = (1e-4, 1e-2, 1.0, 1e2, 1e4)
@@ -57,16 +57,6 @@ def brute_force_f64(origins, dirs, tris):
     return out
 
 
-def camera_rays_f64(cam64, res):
-    """Unit pixel-centre rays in float64 from a float64 camera basis (SPEC section 3)."""
-    x = (np.arange(res) + 0.5) * cam64[14] - cam64[12]
-    y = cam64[13] - (np.arange(res) + 0.5) * cam64[15]
-    u, v = np.meshgrid(x, y)
-    d = cam64[3:6] + u[..., None] * cam64[6:9] + v[..., None] * cam64[9:12]
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    return np.broadcast_to(cam64[:3], d.reshape(-1, 3).shape).copy(), d.reshape(-1, 3)
-
-
 def precision_study(tri_verts64, pose, res=RES):
     """Rows {scale, offset, median_rel, p99_rel, hit_mismatch} for one frame
     (tri_verts64 (n, 9) float64, pose = (eye, look_at, up, fov))."""
@@ -82,8 +72,7 @@ def precision_study(tri_verts64, pose, res=RES):
             hits, (row_off, col_off) = grid.trace_camera(basis, res, res, (0.5, 0.5))
             idx = (row_off[:, None] + col_off[None, :]).reshape(-1)
             t32 = np.where(hits.prim[idx] >= 0, hits.t[idx], np.inf).astype(np.float64)
-            cam64 = _basis64(e, la, up, fov, res)
-            o, d = camera_rays_f64(cam64, res)
+            o, d = pixel_centre_rays(camera_basis(e, la, up, fov, res, res, np.float64), res, res)
             t64 = brute_force_f64(o, d, tv)
             both = np.isfinite(t32) & np.isfinite(t64)
             rel = np.abs(t32[both] - t64[both]) / t64[both]
@@ -93,14 +82,3 @@ def precision_study(tri_verts64, pose, res=RES):
                          "p99_rel": float(np.percentile(rel, 99)) if both.any() else None,
                          "hit_mismatch": float(np.mean(np.isfinite(t32) != np.isfinite(t64)))})
     return rows
-
-
-def _basis64(eye, look_at, up, fov, res):
-    """camera_basis in float64 (the reference camera, not rounded to float32)."""
-    f = look_at - eye
-    f = f / np.linalg.norm(f)
-    r = np.cross(f, up)
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    h = np.tan(np.radians(fov) / 2.0)
-    return np.concatenate([eye, f, r, u, [h, h, 2 * h / res, 2 * h / res]])

@@ -4,10 +4,11 @@ import numpy as np
 from ._jit import helper
 
 
-def camera_basis(eye, look_at, up, fov_deg, width, height):
-    """Pack the camera as a (16,) float32 array for the kernels:
-    eye(3), forward(3), right(3), up'(3), h*aspect, h, 2 h aspect / W, 2 h / H
-    with h = tan(fov/2), aspect = W/H. Computed in float64, rounded once."""
+def camera_basis(eye, look_at, up, fov_deg, width, height, dtype=np.float32):
+    """Pack the camera as a (16,) array for the kernels (float32; float64
+    for references): eye(3), forward(3), right(3), up'(3), h*aspect, h,
+    2 h aspect / W, 2 h / H with h = tan(fov/2), aspect = W/H. Computed in
+    float64, rounded once."""
     eye = np.asarray(eye, np.float64)
     f = np.asarray(look_at, np.float64) - eye
     f /= np.linalg.norm(f)
@@ -19,7 +20,20 @@ def camera_basis(eye, look_at, up, fov_deg, width, height):
     u = np.cross(r, f)
     h = np.tan(np.radians(fov_deg) / 2.0)
     a = width / height
-    return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height]]).astype(np.float32)
+    return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height]]).astype(dtype)
+
+
+def pixel_centre_rays(cam, width, height):
+    """Origins (n, 3) and unit directions (n, 3), float64, of the pixel-centre
+    rays of basis `cam`, row-major from the top: numpy, for references and
+    other ray casters (the kernels compute theirs with primary_dir)."""
+    cam = np.asarray(cam, np.float64)
+    x = (np.arange(width) + 0.5) * cam[14] - cam[12]
+    y = cam[13] - (np.arange(height) + 0.5) * cam[15]
+    u, v = np.meshgrid(x, y)
+    d = cam[3:6] + u[..., None] * cam[6:9] + v[..., None] * cam[9:12]
+    d = (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
+    return np.broadcast_to(cam[:3], d.shape).copy(), d
 
 
 @helper
