@@ -26,9 +26,10 @@ def make(name: str, out_dir: Path):
 
 def render_preview(anim_yaml: Path, png_path: Path, size: int = 320):
     """Render the middle frame at size x size (4 spp) and write it as a PNG."""
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
     from anim.scene import AnimatedScene
     from raycore.image_io import exr_to_png, write_exr
-    from .pipeline import SceneRenderer, config_of, shading_of
 
     scene = AnimatedScene(anim_yaml)
     frames = scene.frame_numbers

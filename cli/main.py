@@ -62,7 +62,7 @@ class Group(click.Group):
     I/O fault writing a frame into one line and exit 1."""
 
     def invoke(self, ctx):
-        from cli.pipeline import FrameWriteError
+        from anim.render.job import FrameWriteError
         main_thread = threading.current_thread() is threading.main_thread()
         before = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
@@ -185,8 +185,11 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
+    from anim.render.frame_files import frame_path
+    from anim.render.job import RenderJob, render_animation
+    from anim.render.settings import config_of
     from raycore._jit import set_threads
-    from .pipeline import RenderJob, config_of, frame_path, render_animation
+
     from .report import progress, summary_table
 
     scene = load_scene(anim_yaml)
@@ -207,7 +210,8 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite)
     show = not quiet and sys.stderr.isatty()
     if preview_path:
-        from .paths import writable_file
+        from anim.render.paths import writable_file
+
         from .preview import FORMATS
         writable_file(preview_path, "the --preview animation", FORMATS)
     stop = StopRequest()
@@ -220,7 +224,8 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
         for s, handler in before.items():
             signal.signal(s, handler)
     if preview_path:
-        from .pipeline import frame_file
+        from anim.render.frame_files import frame_file
+
         from .preview import write_animation
         n = write_animation([frame_file(scene, out_dir, f) for f in frames], preview_path, spec.frames.fps)
         if not quiet:
@@ -273,10 +278,12 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
+
+    from anim.measure.bench import SCENE_NAMES, run_bench
+    from anim.render.paths import writable_file
     from raycore._jit import set_threads
-    from .bench import SCENE_NAMES, run_bench
+
     from .report import bench_table
-    from .paths import writable_file
     names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
     unknown = [n for n in names if n not in SCENE_NAMES]
     if unknown:
@@ -286,7 +293,9 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     if plot_path:
         writable_file(plot_path, "the --plot image", PLOT_FORMATS)
     if error_report:
-        from .error_bench import print_report, run_error_report, write_report
+        from anim.measure.error_study import run_error_report
+
+        from .error_bench import print_report, write_report
         plot_path = writable_file(plot_path or Path("interp_error.png"), "the --plot image", PLOT_FORMATS)
         json_path = writable_file(json_path or plot_path.with_suffix(".json"), "the --json file")
         report = run_error_report(names)
@@ -302,7 +311,7 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     n_threads = set_threads(threads)
     peer_list = []
     if peers:
-        from .peers import PEER_NAMES, available_peers
+        from anim.measure.peers import PEER_NAMES, available_peers
         peer_list = available_peers(n_threads)
         if not peer_list:
             raise click.UsageError(f"--peers: none of {', '.join(PEER_NAMES)} imports here; "
@@ -336,10 +345,13 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
     tests and cells/nodes per packet for each, and the largest image difference."""
     import json
     import tempfile
+
+    from anim.measure.bench import scene_file
+    from anim.measure.compare import compare as run_compare
+    from anim.measure.compare import parse_structures
+    from anim.render.paths import writable_file
     from raycore._jit import set_threads
-    from .bench import scene_file
-    from .compare import compare as run_compare, parse_structures
-    from .paths import writable_file
+
     from .report import compare_table
     if json_path:
         writable_file(json_path, "the --json file")
@@ -389,8 +401,9 @@ def assets_make(name, out_dir, preview_path, overwrite):
     """Generate built-in scene NAME (meshes, weights, textures, anim.yaml); deterministic."""
     from anim import builtin
     from anim.errors import SceneError
+    from anim.render.paths import PREVIEW_FORMATS, writable_dir, writable_file
+
     from .assets import make, render_preview
-    from .paths import PREVIEW_FORMATS, writable_dir, writable_file
     if name not in builtin.ALL:
         raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.ALL)}",
                                  param_hint="NAME")
@@ -417,7 +430,7 @@ def check(anim_yaml, strict):
     """Validate ANIM_YAML (schema, meshes, keys, camera at every frame,
     textures) and summarise it; render nothing. What passes here, `render`
     accepts."""
-    from .pipeline import shading_of
+    from anim.render.settings import shading_of
     scene = load_scene(anim_yaml)
     if strict and scene.outside_paths:
         key, ref = scene.outside_paths[0]

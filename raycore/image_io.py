@@ -36,7 +36,7 @@ COMPRESSIONS = {
     "htj2k32": ("HTJ2K32_COMPRESSION", "lossless"),
 }
 COMPRESSIONS = {k: v for k, v in COMPRESSIONS.items() if hasattr(OpenEXR, v[0])}
-# The render waits for the write (cli/pipeline.py), so the codec may
+# The render waits for the write (anim/render/job.py), so the codec may
 # use every core: zip compresses in blocks of 16 scanlines in parallel.
 OpenEXR.set_global_thread_count(os.cpu_count() or 1)
 oiio.attribute("threads", 0)

@@ -8,7 +8,8 @@ from click.testing import CliRunner
 from anim.area_lights import emitter_positions, halton
 from anim.scene import AnimatedScene
 from cli.main import main
-from cli.pipeline import SceneRenderer, config_of, shading_of
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
 from test_scene import scene_with
 
 FLOOR_AND_BALL = ("  - {name: floor, mesh: floor.obj}\n"

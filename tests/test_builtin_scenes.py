@@ -53,7 +53,8 @@ def test_written_scene_reproduces_the_exact_motion_at_its_keys(name, tmp_path):
 
 @pytest.mark.parametrize("name", CLASSIC)
 def test_scene_renders(name, tmp_path):
-    from cli.pipeline import SceneRenderer, config_of, shading_of
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
     scene = AnimatedScene(builtin.get(name).write(tmp_path / name))
     cfg = config_of(scene, width=64, height=64, packet=8, spp=1, aovs=())
     _, result = SceneRenderer(scene, cfg, shading_of(scene)).render(scene.time_of(scene.frame_numbers[5]))
@@ -64,7 +65,8 @@ def test_scene_renders(name, tmp_path):
 
 
 def test_fairy_takes_the_incremental_grid_path(tmp_path):
-    from cli.pipeline import SceneRenderer, config_of, shading_of
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
     scene = AnimatedScene(builtin.get("fairy").write(tmp_path / "fairy"))
     cfg = config_of(scene, width=32, height=32, packet=8)
     renderer = SceneRenderer(scene, cfg, shading_of(scene))

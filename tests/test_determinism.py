@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from anim.scene import AnimatedScene
-from cli.pipeline import SceneRenderer, config_of, shading_of
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
 from raycore._jit import set_threads
 
 DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo" / "anim.yaml"

@@ -128,7 +128,8 @@ def _failing_write(fail_at, make_error):
 @pytest.mark.parametrize("fault", ["ENOSPC", "EIO", "directory removed", "directory read-only"])
 def test_io_faults_name_the_frame_and_keep_earlier_frames(tmp_path, monkeypatch, fault):
     import shutil
-    import cli.pipeline
+    import anim.render.job
+    import anim.render.renderer
 
     def make_error(path):
         if fault in ("ENOSPC", "EIO"):
@@ -141,7 +142,7 @@ def test_io_faults_name_the_frame_and_keep_earlier_frames(tmp_path, monkeypatch,
 
     if fault == "directory read-only" and os.geteuid() == 0:
         pytest.skip("root writes into read-only directories")
-    monkeypatch.setattr(cli.pipeline, "write_exr", _failing_write(4, make_error))
+    monkeypatch.setattr(anim.render.job, "write_exr", _failing_write(4, make_error))
     out = tmp_path / "out"
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(out), *ARGS])
     assert res.exit_code == 1, res.output
@@ -172,7 +173,7 @@ def test_two_resume_renders_into_one_directory_share_the_frames(tmp_path, refere
 
 
 def test_a_claim_of_a_dead_process_does_not_block(tmp_path):
-    from cli.output_dir import claim, claim_path, release
+    from anim.render.output_dir import claim, claim_path, release
     frame = tmp_path / "frame_0001.exr"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
@@ -184,11 +185,39 @@ def test_a_claim_of_a_dead_process_does_not_block(tmp_path):
     assert not claim_path(frame).exists()
 
 
+def test_a_write_probe_left_by_a_kill_is_removed_by_the_next_run(tmp_path, monkeypatch):
+    """The probe that checks a directory is writable is named like the other
+    temporaries: killed between its creation and its removal (found by the
+    kill loop above), the next run removes it."""
+    import tempfile
+    from anim.render.output_dir import remove_stale_temps
+    from anim.render.paths import writable_dir
+    made = []
+    real_mkstemp = tempfile.mkstemp
+
+    def mkstemp_and_die(*args, **kw):          # the kill, right after the probe exists
+        fd, path = real_mkstemp(*args, **kw)
+        made.append(path)
+        raise KeyboardInterrupt
+    monkeypatch.setattr(tempfile, "mkstemp", mkstemp_and_die)
+    with pytest.raises(KeyboardInterrupt):
+        writable_dir(tmp_path, "frames")
+    monkeypatch.setattr(tempfile, "mkstemp", real_mkstemp)
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    probe = Path(made[0])
+    left = probe.with_name(probe.name.replace(f".{os.getpid()}.tmp", f".{dead.pid}.tmp"))
+    probe.rename(left)                         # as if its process were the dead one
+    assert remove_stale_temps(tmp_path) == [left.name]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_memory_stays_flat_over_a_long_render(tmp_path):
     """2,000 frames at 64^2: resident memory after the last is within 5% of
     that after frame 100 (buffers, grids and stats rows do not pile up)."""
     from anim.scene import AnimatedScene
-    from cli.pipeline import RenderJob, config_of, render_animation
+    from anim.render.job import RenderJob, render_animation
+    from anim.render.settings import config_of
     text = DEMO.read_text().replace("end: 47", "end: 1999")
     scene_path = tmp_path / "anim.yaml"
     scene_path.write_text(text)
@@ -209,7 +238,7 @@ def test_memory_stays_flat_over_a_long_render(tmp_path):
 
 
 def test_a_second_ctrl_c_stops_at_once_and_still_leaves_no_broken_file(tmp_path):
-    from cli.output_dir import whole_frame
+    from anim.render.output_dir import whole_frame
     out = tmp_path / "out"
     proc = frustrace("render", DEMO, "-o", out, *ARGS)
     while proc.poll() is None and (len(exr_frames(out)) if out.exists() else 0) < 2:
@@ -222,16 +251,17 @@ def test_a_second_ctrl_c_stops_at_once_and_still_leaves_no_broken_file(tmp_path)
 
 
 def test_a_render_that_would_not_fit_in_memory_is_refused_with_the_estimate(tmp_path, monkeypatch):
-    import cli.pipeline
+    import anim.render.job
+    import anim.render.renderer
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "huge"), "--res", "16384x16384", "-q"])
-    if cli.pipeline.available_bytes() and cli.pipeline.available_bytes() < 60 * 1024 ** 3:
+    if anim.render.renderer.available_bytes() and anim.render.renderer.available_bytes() < 60 * 1024 ** 3:
         assert res.exit_code == 2 and "GiB of work memory" in res.output, res.output
     # a normal frame on a machine that has (pretended) 50 MB left: refused before the first frame
-    monkeypatch.setattr(cli.pipeline, "available_bytes", lambda: 50 * 1024 ** 2)
+    monkeypatch.setattr(anim.render.renderer, "available_bytes", lambda: 50 * 1024 ** 2)
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "out"), "--res", "1024x1024", "-q"])
     assert res.exit_code == 2 and "output.resolution" in res.output and "50 MiB are available" in res.output
     assert not list((tmp_path / "out").glob("*.exr")) if (tmp_path / "out").exists() else True
-    monkeypatch.setattr(cli.pipeline, "available_bytes", lambda: 8 * 1024 ** 3)
+    monkeypatch.setattr(anim.render.renderer, "available_bytes", lambda: 8 * 1024 ** 3)
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "ok"), "--res", "64x48",
                                     "--frames", "0:0", "-q"])
     assert res.exit_code == 0, res.output

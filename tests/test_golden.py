@@ -11,7 +11,8 @@ import pytest
 
 from anim import builtin
 from anim.scene import AnimatedScene
-from cli.pipeline import SceneRenderer, config_of, shading_of
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 SIZE = 64

@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.main import main
-from cli.pipeline import frame_path
+from anim.render.frame_files import frame_path
 from test_scene import scene_with
 
 BALL = "  - {name: ball, mesh: ball.obj}\n"

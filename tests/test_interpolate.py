@@ -3,7 +3,7 @@ convergence orders against the dense analytic motion, extrapolation."""
 import numpy as np
 import pytest
 
-from anim.error_report import measure
+from anim.measure.interp_error import measure
 from anim.interpolate import EXPECTED_ORDER, METHODS, Curve, RotationCurve
 
 

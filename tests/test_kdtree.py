@@ -157,7 +157,8 @@ def test_tree_structure_is_consistent(rng):
 def test_kdtree_frames_equal_grid_frames(tmp_path):
     from anim import builtin
     from anim.scene import AnimatedScene
-    from cli.pipeline import SceneRenderer, config_of, shading_of
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
     scene = AnimatedScene(builtin.get("toys").write(tmp_path / "toys"))
     out = {}
     for accel in ("grid", "kdtree"):

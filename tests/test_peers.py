@@ -4,7 +4,7 @@ frustrace pixel for pixel."""
 import numpy as np
 from click.testing import CliRunner
 
-from cli.peers import camera_rays, shadow_rays
+from anim.measure.peers import camera_rays, shadow_rays
 from oracles import brute_force_closest, kernel_camera_rays
 from raycore.camera import camera_basis
 from raycore.frame import CameraPose
@@ -50,9 +50,9 @@ def test_shadow_rays_leave_the_lit_side_and_stop_at_the_light():
 
 def test_bench_peers_rows_agree_with_frustrace(monkeypatch, tmp_path):
     import json
-    import cli.peers
+    import anim.measure.peers
     from cli.main import main
-    monkeypatch.setattr(cli.peers, "available_peers", lambda threads: [BruteForcePeer()])
+    monkeypatch.setattr(anim.measure.peers, "available_peers", lambda threads: [BruteForcePeer()])
     out = tmp_path / "bench.json"
     res = CliRunner().invoke(main, ["bench", "--scene", "toys", "--res", "16", "--frames", "1",
                                     "--packet", "8", "--peers", "--json", str(out),
@@ -68,8 +68,8 @@ def test_bench_peers_rows_agree_with_frustrace(monkeypatch, tmp_path):
 
 
 def test_bench_peers_without_any_peer_installed_is_a_usage_error(monkeypatch):
-    import cli.peers
+    import anim.measure.peers
     from cli.main import main
-    monkeypatch.setattr(cli.peers, "available_peers", lambda threads: [])
+    monkeypatch.setattr(anim.measure.peers, "available_peers", lambda threads: [])
     res = CliRunner().invoke(main, ["bench", "--scene", "demo", "--peers"])
     assert res.exit_code == 2 and "frustrace[peers]" in res.output

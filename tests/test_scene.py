@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 from anim.scene import AnimatedScene
 from anim.errors import SceneError
 from raycore.config import RenderConfig
-from cli.pipeline import SceneRenderer, shading_of
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import shading_of
 
 DEMO = Path(__file__).resolve().parent.parent / "anim" / "builtin" / "demo"
 

@@ -65,7 +65,8 @@ def test_all_static_scene_builds_the_grid_once(rng):
 
 def test_frame_renders_the_same_alone_or_in_sequence(tmp_path):
     from anim.scene import AnimatedScene
-    from cli.pipeline import SceneRenderer, shading_of
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import shading_of
     from raycore.config import RenderConfig
     from test_scene import scene_with
     path = scene_with(tmp_path, """  - name: floor
@@ -90,7 +91,8 @@ def test_frame_renders_the_same_alone_or_in_sequence(tmp_path):
 
 def test_static_scene_builds_its_kd_tree_once(tmp_path):
     from anim.scene import AnimatedScene
-    from cli.pipeline import SceneRenderer, config_of, shading_of
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
     from test_scene import scene_with
     path = scene_with(tmp_path, """  - name: floor
     mesh: floor.obj

@@ -5,7 +5,7 @@ import pytest
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
-from anim.error_report import bounce_overshoot
+from anim.measure.interp_error import bounce_overshoot
 from anim.interpolate import METHODS, Curve, RotationCurve, break_segments
 from anim.builtin.authoring import write_obj
 from anim.scene import AnimatedScene

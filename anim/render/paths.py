@@ -24,7 +24,9 @@ def writable_dir(directory: Path, what: str) -> Path:
             raise SceneError(parent, "", f"is a file, so {what} cannot go under it")
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".frustrace-probe-", dir=directory)
+        # named like the other temporaries (.NAME.PID.tmp): if a kill lands
+        # between its creation and its removal, the next run removes it
+        fd, probe = tempfile.mkstemp(prefix=".frustrace-probe.", suffix=f".{os.getpid()}.tmp", dir=directory)
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:

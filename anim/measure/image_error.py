@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from anim import builtin
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
 from anim.scene import AnimatedScene
 from anim.schema import Light
-
-from .pipeline import SceneRenderer, config_of, shading_of
 
 SPPS = (1, 2, 4, 8, 16, 32, 64)
 REF_SPP = 256

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from .interpolate import EXPECTED_ORDER, METHODS, Curve
+from anim.interpolate import EXPECTED_ORDER, METHODS, Curve
 
 INTERIOR = 0.25         # fraction of the key range left out at each end
 # Key ranges start this fraction of the period late, so that evenly spaced keys

@@ -3,9 +3,10 @@ structures — build and trace times, fps, ray/triangle tests, cells or nodes
 visited per packet — and how much their images differ."""
 import numpy as np
 
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
+from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
-
-from .pipeline import SceneRenderer, config_of, fps_of, median_ms, shading_of
 
 STRUCTURES = {
     "grid": {"accel": "grid"},

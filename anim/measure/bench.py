@@ -1,0 +1,123 @@
+"""`frustrace bench` rows: fps per phase on built-in scenes, medians over frames.
+
+Frames are rendered exactly as `render` does (interpolate, rebuild, trace,
+shadow, shade) and written to one temporary EXR (write_ms); compile time is
+spent in a warm-up first and reported apart. Rows follow SPEC section 5, plus
+interp_ms, write_ms and shadow_mrays_per_s; with --peers, a row per peer
+(anim/measure/peers.py) with hit_agreement, and vs_best_peer on frustrace's rows.
+"""
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from anim import builtin
+from anim.errors import SceneError
+from anim.render.renderer import SceneRenderer
+from anim.render.settings import config_of, shading_of
+from anim.render.stats import fps_of, median_ms
+from anim.scene import AnimatedScene
+from raycore.frame import KD_PACKET, CameraPose
+from raycore.image_io import write_exr
+
+SCENE_NAMES = tuple(builtin.ALL)
+
+
+def scene_file(name: str, workdir: Path) -> Path:
+    """A built-in scene's anim.yaml written into workdir/name (generated, or
+    the demo's shipped files copied)."""
+    if name not in builtin.ALL:
+        raise SceneError("--scene", "", f"unknown scene {name!r}; built-in: {', '.join(SCENE_NAMES)}")
+    return builtin.get(name).write(workdir / name)
+
+
+def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int,
+                accel: str = "grid", workdir: Path = None, depth_out: list = None) -> dict:
+    """One row: medians over n_frames frames (after a warm-up frame). With
+    depth_out, the first measured frame's Z is appended to it."""
+    scene = AnimatedScene(path)
+    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=(), accel=accel)
+    renderer = SceneRenderer(scene, cfg, shading_of(scene))
+    frames = scene.frame_numbers[:max(1, n_frames)]
+    rows = []
+    for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up
+        interp_ms, result = renderer.render(scene.time_of(frame))
+        t0 = time.perf_counter()
+        if workdir is not None:          # the frame's EXR, as `render` writes it
+            write_exr(str(workdir / "bench_frame.exr"), {"RGBA": result.rgba, "Z": result.z}, {},
+                      scene.spec.output.compression)
+        write_ms = (time.perf_counter() - t0) * 1e3
+        if i == 1 and depth_out is not None:
+            depth_out.append(result.z.reshape(-1).copy())
+        if i > 0:
+            rows.append({"interp_ms": interp_ms, **result.timings, "write_ms": write_ms,
+                         "tri_tests": result.counters["tri_tests"],
+                         "shadow_rays": result.counters["shadow_rays"]})
+    return _row(name, accel, packet if accel == "grid" else KD_PACKET, threads, scene, res, rows)
+
+
+def _row(name, accel, packet, threads, scene, res, rows):
+    """A table row from per-frame timings."""
+    fps_raycast, fps_full = fps_of(rows)
+    return {"scene": name, "accel": accel, "packet": packet, "threads": threads,
+            "triangles": int(scene.faces.shape[0]), "resolution": res, "frames": len(rows),
+            **{k: median_ms(rows, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
+                                              "shadow_ms", "write_ms")},
+            "fps_raycast": fps_raycast, "fps_full": fps_full,
+            "mrays_per_s": res * res / median_ms(rows, "trace_ms") / 1e3,
+            # shadow rays actually cast (facing-away points and dark lights cost none)
+            "shadow_mrays_per_s": (median_ms(rows, "shadow_rays") / median_ms(rows, "shadow_ms") / 1e3
+                                   if median_ms(rows, "shadow_ms") > 0 else 0.0),
+            "tri_tests": median_ms(rows, "tri_tests")}
+
+
+def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: int,
+               interp_ms: float, reference_z=None) -> dict:
+    """A row for a peer (anim/measure/peers.py) on the same frames as bench_scene: no
+    shading, no write. interp_ms is frustrace's median for these frames (the
+    same interpolation; timed here it would also time the peers' idle thread
+    pools, which spin for a while after each call). With reference_z
+    (frustrace's Z of the first measured frame), the share of pixels whose
+    hit or miss agrees goes into the row."""
+    from .peers import peer_frame
+    scene = AnimatedScene(path)
+    lights = shading_of(scene).lights
+    frames = scene.frame_numbers[:max(1, n_frames)]
+    rows = []
+    for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up
+        t = scene.time_of(frame)
+        timings, depth = peer_frame(peer, scene.vertices_at(t), scene.faces,
+                                    CameraPose(*scene.camera_at(t)), res, res, lights)
+        if i == 1 and reference_z is not None:
+            agree = float(np.mean(np.isfinite(depth) == np.isfinite(reference_z)))
+        if i > 0:
+            rows.append({"interp_ms": interp_ms, **timings, "write_ms": 0.0, "tri_tests": 0})
+    row = {**_row(name, peer.name, 0, threads, scene, res, rows), "peer": True}
+    if reference_z is not None:
+        row["hit_agreement"] = agree
+    return row
+
+
+def run_bench(names, res, n_frames, packets, threads, accels=("grid",), peers=()):
+    """Rows for every scene, structure and packet size, then one per peer
+    and scene; frustrace rows get vs_best_peer (fps_full over the best
+    peer's fps_full on that scene)."""
+    with tempfile.TemporaryDirectory(prefix="frustrace-bench-") as tmp:
+        paths = {n: scene_file(n, Path(tmp)) for n in names}
+        rows = []
+        for n in names:
+            depth = []
+            for accel in accels:      # the kd-tree's packets are always KD_PACKET^2
+                for p in (packets if accel == "grid" else packets[:1]):
+                    rows.append(bench_scene(paths[n], n, res, n_frames, p, threads, accel, Path(tmp),
+                                            depth))
+            peer_rows = [bench_peer(peer, paths[n], n, res, n_frames, threads, rows[-1]["interp_ms"],
+                                    depth[0]) for peer in peers]
+            best = max((r["fps_full"] for r in peer_rows), default=0.0)
+            if best > 0:
+                for r in rows:
+                    if r["scene"] == n:
+                        r["vs_best_peer"] = r["fps_full"] / best
+            rows += peer_rows
+        return rows

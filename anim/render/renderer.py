@@ -1,0 +1,88 @@
+"""Frames of one scene at given times: anim (vertices at t) -> raycore
+(build, trace, shadow, shade), with work buffers reused across frames;
+compile time measured apart by a warm-up; the work memory a render needs,
+checked before it starts."""
+import time
+
+from anim.errors import SceneError
+from anim.scene import AnimatedScene
+from raycore.config import RenderConfig
+from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
+from raycore.mesh import vertex_face_csr
+from raycore.scene_grid import SceneGrid
+
+
+class SceneRenderer:
+    """Frames of one scene, rendered with reused work buffers: interpolate
+    (timed as interp_ms), then build, trace, shadow and shade."""
+
+    def __init__(self, scene: AnimatedScene, cfg: RenderConfig, shading: Shading, pending_writes: int = 0):
+        self.scene, self.cfg, self.shading = scene, cfg, shading
+        self.vf = vertex_face_csr(scene.faces, scene.n_vertices)
+        # image ring: the frame being written, the one being rendered, and every
+        # write in flight (pending_writes: how many frames may still be writing)
+        self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet,
+                                    n_images=pending_writes + 2)
+        # static objects: gathered, binned and given normals once (raycore/scene_grid.py)
+        self.scene_grid = SceneGrid(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
+                                    scene.moving_triangles)
+
+    def render(self, t):
+        """(interp_ms, FrameResult) of the frame at time t."""
+        scene = self.scene
+        t0 = time.perf_counter()
+        vertices = scene.vertices_at(t)
+        pose = CameraPose(*scene.camera_at(t))
+        interp_ms = (time.perf_counter() - t0) * 1e3
+        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
+        return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid)
+
+
+def warm_up(scene, shading, cfg, t) -> float:
+    """Compile (or load from numba's cache) every kernel on a tiny image: seconds."""
+    t0 = time.perf_counter()
+    small = cfg.__class__(**{**cfg.__dict__, "width": 2 * cfg.packet, "height": 2 * cfg.packet, "spp": 1})
+    SceneRenderer(scene, small, shading).render(t)
+    return time.perf_counter() - t0
+
+
+# bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),
+# one light's shadow rays and their sort (52), shaded colour (12), the image
+# ring (2 x 20), the half-float copy and the EXR codec's buffers (~28)
+BYTES_PER_PIXEL = 16 + 96 + 52 + 12 + 40 + 28
+
+
+# bytes per triangle: gathered vertices (36), faces and materials (16), normals
+# and their CSR (~24), grid cell lists (~4 cells x 4) and a kd-tree (~64)
+BYTES_PER_TRIANGLE = 36 + 16 + 24 + 16 + 64
+
+
+def available_bytes():
+    """MemAvailable of /proc/meminfo (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(scene, cfg, available=None):
+    """SceneError (exit 2) with the estimate if rendering would not fit in
+    the memory available now, instead of an out-of-memory kill mid-run."""
+    pixels = cfg.width * cfg.height
+    per_pixel = (BYTES_PER_PIXEL + 4 * len(scene.spec.lights)
+                 + sum({"N": 24, "P": 24, "id": 8}[a] for a in cfg.aovs))    # AOV + its EXR copy
+    need = pixels * per_pixel + scene.faces.shape[0] * BYTES_PER_TRIANGLE
+    available = available_bytes() if available is None else available
+    if available is not None and need > 0.9 * available:
+        raise SceneError(scene.path, "output.resolution",
+                         f"{cfg.width}x{cfg.height} with {scene.faces.shape[0]:,} triangles needs about "
+                         f"{_size(need)} of work memory; {_size(available)} are available")
+    return need
+
+
+def _size(n_bytes) -> str:
+    return f"{n_bytes / 1024 ** 3:.1f} GiB" if n_bytes >= 1024 ** 3 else f"{n_bytes / 1024 ** 2:.0f} MiB"

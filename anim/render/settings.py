@@ -1,0 +1,38 @@
+"""A scene file's render settings and shading tables, as raycore takes them."""
+import numpy as np
+
+from anim.errors import SceneError
+from anim.scene import AnimatedScene
+from raycore.config import RenderConfig
+from raycore.frame import Shading
+from raycore.image_io import read_texture
+
+
+def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
+    """The scene file's render settings, with command-line overrides."""
+    spec = scene.spec
+    base = dict(width=spec.output.resolution[0], height=spec.output.resolution[1],
+                packet=spec.render.packet, spp=spec.render.spp, shadows=spec.render.shadows,
+                accel=spec.render.accel, grid_density=spec.render.grid_density,
+                light_probes=spec.render.light_probes,
+                background=tuple(spec.render.background), ambient=spec.render.ambient,
+                aovs=tuple(spec.output.aovs))
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    return RenderConfig(**base)
+
+
+def shading_of(scene: AnimatedScene) -> Shading:
+    """Materials, lights and textures as flat arrays; textures loaded once."""
+    texels, info, offset = [], [], 0
+    for path, space, key in zip(scene.texture_paths, scene.texture_spaces, scene.texture_keys):
+        try:
+            img = read_texture(path, space)
+        except OSError as exc:
+            raise SceneError(scene.path, key, f"cannot read texture: {exc}") from None
+        h, w = img.shape[:2]
+        texels.append(img.reshape(-1))
+        info.append((offset, w, h))
+        offset += img.size
+    tex_data = np.concatenate(texels) if texels else np.zeros(1, np.float32)
+    tex_info = np.asarray(info, np.int64).reshape(-1, 3)
+    return Shading(scene.material_table, tex_data, tex_info, scene.light_table)

@@ -1,0 +1,131 @@
+"""stats.json: one row per frame, the runs that made them, and the fps
+arithmetic of SPEC section 5 (medians over frames, compile time apart)."""
+import fcntl
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from raycore.config import RenderConfig
+from raycore.frame import KD_PACKET
+
+
+def write_stats(path: Path, scene, cfg, rows, run, file_of, frames) -> dict:
+    """Merge this run into stats.json under a lock on its directory (two
+    renders sharing a directory each add their frames): the earlier runs'
+    frames whose files still exist, this run's, and the job's frames on disk
+    that no stats.json lists (written by a run that was killed), recovered
+    from their EXR headers. Written atomically."""
+    fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        previous = read_stats(path) or {"frames": [], "runs": []}
+        previous["frames"] = [r for r in previous["frames"] if file_of(r["frame"]).exists()]
+        listed = {r["frame"] for r in previous["frames"]} | {r["frame"] for r in rows}
+        for f in frames:
+            if f not in listed and file_of(f).exists():
+                row = recovered_row(file_of(f))
+                if row is not None:
+                    previous["frames"].append(row)
+        stats = merged_stats(previous, scene, cfg, rows, run)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(stats, indent=1))
+        tmp.replace(path)
+    finally:
+        os.close(fd)                   # releases the lock
+    return stats
+
+
+def recovered_row(path: Path):
+    """The stats row a frame carries in its header (frustrace:stats), marked
+    recovered (its write_ms is unknown: 0); None for a file without one."""
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return None
+    try:
+        row = json.loads(inp.spec().getattribute("frustrace:stats") or "null")
+    except ValueError:
+        row = None
+    finally:
+        inp.close()
+    if not isinstance(row, dict) or not all(isinstance(row.get(k), (int, float)) for k in PHASE_KEYS):
+        return None
+    return {**row, "recovered": True}
+
+
+def frame_row(scene, frame, t, interp_ms, result) -> dict:
+    """The stats.json entry of one rendered frame (SPEC section 5, and more)."""
+    tm = result.timings
+    rays = result.counters["rays"]
+    return {"frame": frame, "time": t, "triangles": int(scene.faces.shape[0]), "rays": rays,
+            "interp_ms": interp_ms, **tm, "write_ms": 0.0,
+            "tri_tests": float(result.counters["tri_tests"]),
+            "shadow_rays": result.counters["shadow_rays"],
+            "shadow_rays_left_out": result.counters["shadow_rays_skipped"],   # facing away, dark, outside a penumbra
+            "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
+            "fallback_rays": result.counters["fallback_rays"],
+            **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
+               else {"kd_nodes": result.counters["kd_nodes"]}),
+            "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
+
+
+def settings_of(cfg: RenderConfig) -> dict:
+    """What decides a frame's pixels, recorded with every run; the packet
+    size the accelerator really used (the kd-tree's is always KD_PACKET)."""
+    return {"accel": cfg.accel, "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
+            "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density}
+
+
+PHASE_KEYS = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms")
+
+
+def read_stats(path: Path):
+    """An earlier run's stats.json, or None if there is none or it is not
+    one of ours (then this run's stats replace it)."""
+    try:
+        stats = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    frames = stats.get("frames") if isinstance(stats, dict) else None
+    ok = isinstance(frames, list) and all(
+        isinstance(r, dict) and isinstance(r.get("frame"), int)
+        and all(isinstance(r.get(k), (int, float)) for k in PHASE_KEYS) for r in frames)
+    return stats if ok else None
+
+
+def merged_stats(previous, scene, cfg, rows, run) -> dict:
+    """stats.json: this run's frames over an earlier run's, by frame number;
+    the summary's medians over all of them, fps_wall and compile time of
+    this run; every run listed with its settings."""
+    frames = {r["frame"]: r for r in previous["frames"]}
+    runs = [r for r in previous.get("runs", []) if isinstance(r, dict)]
+    for r in rows:
+        frames[r["frame"]] = {**r, "run": len(runs)}
+    merged = [frames[k] for k in sorted(frames)]
+    summary = summarize(merged, run["wall_s"], run["compile_s"])
+    summary["fps_wall"] = len(rows) / run["wall_s"] if rows and run["wall_s"] > 0 else 0.0
+    return {"scene": scene.path.name, "resolution": [cfg.width, cfg.height], **settings_of(cfg),
+            "frames": merged, "runs": runs + [run], "summary": summary}
+
+
+def median_ms(rows, *keys) -> float:
+    """Median over frames of the sum of the given phase timings (0 if none)."""
+    return float(np.median([sum(r[k] for k in keys) for r in rows])) if rows else 0.0
+
+
+def fps_of(rows):
+    """(fps_raycast, fps_full) as SPEC section 5 defines them."""
+    raycast = median_ms(rows, "interp_ms", "build_ms", "trace_ms")
+    full = median_ms(rows, "interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms")
+    return (1000.0 / raycast if raycast > 0 else 0.0), (1000.0 / full if full > 0 else 0.0)
+
+
+def summarize(rows, wall_s, compile_s) -> dict:
+    """The stats.json summary: fps (medians over frames), compile time apart."""
+    fps_raycast, fps_full = fps_of(rows)
+    return {"fps_raycast": fps_raycast, "fps_full": fps_full,
+            "fps_wall": len(rows) / wall_s if rows and wall_s > 0 else 0.0,
+            "compile_s": compile_s,
+            "median_ms": {k: median_ms(rows, k) for k in PHASE_KEYS}}
