@@ -7,35 +7,20 @@ structure once and never asks which one it has.
              Traversal (grid_drivers.py), shadow rays in light-space packets
              (shadow_packets.py), ray batches in packets;
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
-             shadow rays and batches one by one (kdtree_trace.py).
+             shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py).
 
-Counters are named (Counters): `visits` are grid cells or kd nodes, and
-`candidates` are triangles surviving the grid's culling or kd leaves.
+Counters are named (counters.Counters): `visits` are grid cells or kd
+nodes, and `candidates` are triangles surviving the grid's culling or kd leaves.
 """
-from typing import NamedTuple
-
-import numpy as np
-
+from .counters import Counters
 from .grid_build import Grid
 from .kdtree_build import KdTree
-from .kdtree_trace import kd_light_visibility, kd_trace_camera, kd_trace_rays
+from .kdtree_packets import kd_trace_camera
+from .kdtree_rays import kd_light_visibility, kd_trace_rays
 from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera, trace_rays
 
 # the kd-tree's camera packets are always KD_PACKET^2 rays
 KD_PACKET = 8
-
-
-class Counters(NamedTuple):
-    """Work done by one call, summed over its packets."""
-    packets: int
-    visits: int          # grid cells / kd-tree nodes visited
-    tests: int           # ray-triangle tests
-    candidates: int      # grid: triangles past mailbox and culling; kd-tree: leaves visited
-    fallback_rays: int   # rays traced one by one because their packet had no common direction
-
-    @classmethod
-    def of(cls, raw):
-        return cls(*(int(v) for v in np.asarray(raw)[:5]))
 
 
 class GridAccel:

@@ -26,10 +26,16 @@ Ray packets are SoA float32 arrays shaped (row, sub-packet j, ray r): every
 loop indexes them with loop counters that start at 0, which lets LLVM drop
 numba's negative-index wraparound and vectorize the per-ray loops (an index
 like `base + r` instead measured 3-4x slower).
+
+The file is longer than the others (~460 lines) for one reason: `walk` is
+one kernel of ~190 lines whose slice, cell, triangle and ray loops share
+their live values; its set-up and culling helpers read the same row
+constants and make sense only beside it.
 """
 import numpy as np
 
 from ._jit import helper, kernel
+from .counters import CANDIDATES, PACKETS, TESTS, VISITS
 from .triangle import woop_test
 
 F0 = np.float32(0.0)
@@ -51,9 +57,6 @@ N_WORK = 11
 UMIN, UMAX, GUMIN, GUMAX, VMIN, VMAX, GVMIN, GVMAX, WMIN, WMAX = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 N_SUB_ROWS = 10
 MAILBOX_SIZE = 256            # power of two; collisions only cost a re-test
-# counters (per tile): 0 packets, 1 cells visited, 2 ray-triangle tests,
-# 3 triangle candidates after mailbox, 4 rays sent to the single-ray fallback
-N_COUNTERS = 5
 
 
 @kernel
@@ -271,8 +274,7 @@ def _edge_normal(pu, pv, pk, qu, qv, qk):
 
 @kernel
 def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
-         sub, sub_done, sub_skip, mailbox,
-         g_lo, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile, cull):
+         sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps, counters, tile, cull):
     """Walk the grid slice by slice along K for a set-up packet, updating the
     closest hits (hit_t must hold each ray's t_max, hit_prim -1 on entry).
 
@@ -286,6 +288,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
     neighbour's (cross products without FMA contraction), and zero is inclusive.
     The distance comes from the triangle's plane (normal from its edges).
     """
+    g_lo, _, g_dims, g_cell, g_inv, cell_start, cell_tris = grid
     n_sub = work.shape[1]
     ss = work.shape[2]
     U = (K + 1) % 3
@@ -456,7 +459,7 @@ def walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_
         if done >= n_sub * ss:
             break
         q += s
-    counters[tile, 0] += 1
-    counters[tile, 1] += n_cells
-    counters[tile, 2] += n_tests
-    counters[tile, 3] += n_cand
+    counters[tile, PACKETS] += 1
+    counters[tile, VISITS] += n_cells
+    counters[tile, TESTS] += n_tests
+    counters[tile, CANDIDATES] += n_cand

@@ -26,12 +26,13 @@ def clip_to_box(o, d, lo, hi, t0, t1):
 
 
 @kernel
-def dda_trace(ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit,
-              g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts):
-    """Closest (or, with any_hit, any) hit in (t_min, t_max).
+def dda_trace(ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, grid, tri_verts):
+    """Closest (or, with any_hit, any) hit in (t_min, t_max) in `grid`
+    (grid_build.Grid).
 
     Returns (t, prim, b1, b2, cells_visited, tri_tests); prim = -1 on a miss.
     """
+    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris = grid
     o = (ox, oy, oz)
     d = (dx, dy, dz)
     best_t = t_max

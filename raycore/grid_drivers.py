@@ -1,24 +1,22 @@
 """The grid's drivers: every packet walk starts here. Camera packets
-(trace_primary), batches of arbitrary rays (trace_ray_batch) and shadow rays
-in light-space order (trace_ordered) are pulled from a shared counter
+(trace_primary) and batches of rays (trace_ray_batch: arbitrary rays, and
+shadow rays in light-space order) are pulled from the tile queue
 (tile_queue.py) by one worker per thread and traced by trace_or_fallback:
 Coherent Grid Traversal (grid_cgt.walk), or single-ray DDA (grid_dda.py)
 for a packet whose rays share no direction sign on any axis."""
-import numpy as np
 from numba import prange
 
-from ._jit import fetch_add, helper, kernel, parallel_kernel
+from ._jit import helper, kernel, parallel_kernel
 from .camera_packets import camera_rays, setup_camera
+from .counters import FALLBACK_RAYS, TESTS, VISITS
 from .grid_cgt import DX, DY, DZ, F1, OX, OY, OZ, TMAX, TMIN, setup_rays, walk
 from .grid_dda import dda_trace
 from .packet_layout import packet_scratch, ray_offsets
-from .tile_queue import tile_corner, tile_count
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
 
 
 @kernel
-def dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
-                g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
-                counters, tile):
+def dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, grid, tri_verts, counters, tile):
     """Single-ray DDA for every active ray of a packet that has no common
     major axis (its rays point to both sides of every axis)."""
     for j in range(rays.shape[1]):
@@ -29,22 +27,20 @@ def dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit,
                 t, prim, b1, b2, cells, tests = dda_trace(
                     rays[OX, j, r], rays[OY, j, r], rays[OZ, j, r],
                     rays[DX, j, r], rays[DY, j, r], rays[DZ, j, r],
-                    rays[TMIN, j, r], rays[TMAX, j, r], any_hit,
-                    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts)
+                    rays[TMIN, j, r], rays[TMAX, j, r], any_hit, grid, tri_verts)
                 hit_t[j, r] = t
                 hit_prim[j, r] = prim
                 hit_b1[j, r] = b1
                 hit_b2[j, r] = b2
-                counters[tile, 1] += cells
-                counters[tile, 2] += tests
-                counters[tile, 4] += 1
+                counters[tile, VISITS] += cells
+                counters[tile, TESTS] += tests
+                counters[tile, FALLBACK_RAYS] += 1
 
 
 @kernel
 def trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, sub,
-                      sub_active, sub_done, sub_skip, mailbox,
-                      g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                      tri_verts, eps, counters, tile, cull):
+                      sub_active, sub_done, sub_skip, mailbox, grid, tri_verts, eps, counters, tile,
+                      cull):
     """CGT for a packet of arbitrary rays, or single-ray DDA when the rays
     share no major axis. Fills hit_* (prim -1: nothing before TMAX).
     shared_origin: every ray, padding included, starts at one point (rays
@@ -53,23 +49,21 @@ def trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shar
         for r in range(rays.shape[2]):
             hit_t[j, r] = rays[TMAX, j, r]
             hit_prim[j, r] = -1
-    K, s, n_live, k_ref, w_end = setup_rays(rays, work, sub, sub_active, g_lo, g_hi, eps)
+    K, s, n_live, k_ref, w_end = setup_rays(rays, work, sub, sub_active, grid.lo, grid.hi, eps)
     if K < 0:
-        dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, g_lo, g_hi, g_dims,
-                    g_cell, g_inv, cell_start, cell_tris, tri_verts, counters, tile)
+        dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, any_hit, grid, tri_verts, counters, tile)
     elif n_live > 0:
         walk(work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin, K, s, k_ref, w_end,
-             sub, sub_done, sub_skip, mailbox, g_lo, g_dims, g_cell, g_inv,
-             cell_start, cell_tris, tri_verts, eps, counters, tile, cull)
+             sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps, counters, tile, cull)
 
 
 @parallel_kernel
 def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
-                  g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                  sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
+                  grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
     """Closest hits of the camera rays (sub-pixel offset jx, jy) for every pixel.
 
-    sw_*: packet-major hits (n_packets, n_sub, S*S), packet (px, py) at index
+    grid: grid_build.Grid over tri_verts. sw_*: packet-major hits
+    (n_packets, n_sub, S*S), packet (px, py) at index
     (py // packet) * packets_x + px // packet, ray r of sub-packet j as in
     sub_corner; each packet traces straight into its own slot (copying hits
     out to row-major order inside the traversal cost a third of its time).
@@ -77,15 +71,15 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
     """
     tiles_x, n_tiles = tile_count(width, height, tile_size)
-    next_tile = np.zeros(1, np.int64)
+    queue = new_queue()
     packets_x = (width + packet - 1) // packet
     for _w in prange(n_workers):
         rays, work, _t, _b1, _b2, _prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             packet_scratch(packet, sub_size)
         off_x, off_y = ray_offsets(sub_size)
         while True:
-            tile = fetch_add(next_tile, 0, 1)
-            if tile >= n_tiles:
+            tile = next_tile(queue, n_tiles)
+            if tile < 0:
                 break
             tx0, ty0 = tile_corner(tile, tiles_x, tile_size)
             for py in range(ty0, min(ty0 + tile_size, height), packet):
@@ -97,18 +91,16 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
                     hit_b2 = sw_b2[pk]
                     K, s, n_live, k_ref, w_end = setup_camera(
                         cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
-                        work, hit_t, hit_prim, sub, sub_active, g_lo, g_hi, eps)
+                        work, hit_t, hit_prim, sub, sub_active, grid.lo, grid.hi, eps)
                     if K < 0:
                         camera_rays(rays, cam, px, py, packet, sub_size, width, height,
-                                     jx, jy, off_x, off_y)
-                        dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, False, g_lo, g_hi,
-                                    g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts,
-                                    counters, tile)
+                                    jx, jy, off_x, off_y)
+                        dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, False, grid, tri_verts,
+                                   counters, tile)
                     elif n_live > 0:
                         walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
-                             k_ref, w_end, sub, sub_done, sub_skip, mailbox, g_lo, g_dims,
-                             g_cell, g_inv, cell_start, cell_tris, tri_verts, eps, counters, tile,
-                             cull)
+                             k_ref, w_end, sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
+                             counters, tile, cull)
 
 
 @helper
@@ -134,66 +126,42 @@ def load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max):
 
 
 @parallel_kernel
-def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size, n_workers, any_hit,
-                    g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris, tri_verts, eps,
-                    out_t, out_prim, out_b1, out_b2, counters, cull):
-    """Closest (or any) hits of rays order[0:n_rays], SoA (3, n) origins and
-    directions, in packets of packet^2 consecutive entries of `order` (the
-    caller orders them coherently); ray i's hit goes to out_*[i].
+def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size, n_workers,
+                    any_hit, shared_origin, grid, tri_verts, eps,
+                    out_t, out_prim, out_b1, out_b2, out_vis, counters, cull):
+    """Hits of rays order[0:n_rays], SoA (3, n) origins and directions, in
+    packets of packet^2 consecutive entries of `order` (the caller orders
+    them coherently: light-space order for shadow rays), pulled from the
+    tile queue. Ray i's closest (any_hit: any) hit goes to out_*[i]; or,
+    when out_vis is not empty (shadow rays), only out_vis[i] = 1 for each
+    unoccluded ray (the caller zeroes it). shared_origin: rays from one point.
     counters: (n_packets, N_COUNTERS) int64."""
     ss = sub_size * sub_size
     per_packet = packet * packet // ss * ss
     n_packets = (n_rays + per_packet - 1) // per_packet
-    next_packet = np.zeros(1, np.int64)
+    visibility = out_vis.shape[0] > 0
+    queue = new_queue()
     for _w in prange(n_workers):
         rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
             packet_scratch(packet, sub_size)
         while True:
-            pk = fetch_add(next_packet, 0, 1)
-            if pk >= n_packets:
+            pk = next_tile(queue, n_packets)
+            if pk < 0:
                 break
             load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max)
-            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, False,
-                              sub, sub_active, sub_done, sub_skip, mailbox,
-                              g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                              tri_verts, eps, counters, pk, cull)
+            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin,
+                              sub, sub_active, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
+                              counters, pk, cull)
             for j in range(rays.shape[1]):
                 for r in range(ss):
                     s = pk * per_packet + j * ss + r
                     if s < n_rays:
                         i = order[s]
-                        out_t[i] = hit_t[j, r]
-                        out_prim[i] = hit_prim[j, r]
-                        out_b1[i] = hit_b1[j, r]
-                        out_b2[i] = hit_b2[j, r]
-
-
-@parallel_kernel
-def trace_ordered(order, n_rays, ray_o, ray_d, t_min, t_max, shared_origin, packet, sub_size,
-                  n_workers, g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                  tri_verts, eps, out_vis, counters, cull):
-    """Any-hit shadow rays order[0:n_rays] in packets of packet^2 consecutive
-    entries, pulled from a shared counter; out_vis[i] = 1 for each unoccluded
-    ray i (the caller zeroes it). shared_origin: rays from one point light.
-    counters: (n_packets, N_COUNTERS) int64."""
-    ss = sub_size * sub_size
-    per_packet = packet * packet // ss * ss
-    n_packets = (n_rays + per_packet - 1) // per_packet
-    next_packet = np.zeros(1, np.int64)
-    for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
-            packet_scratch(packet, sub_size)
-        while True:
-            pk = fetch_add(next_packet, 0, 1)
-            if pk >= n_packets:
-                break
-            load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max)
-            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, True, shared_origin,
-                              sub, sub_active, sub_done, sub_skip, mailbox,
-                              g_lo, g_hi, g_dims, g_cell, g_inv, cell_start, cell_tris,
-                              tri_verts, eps, counters, pk, cull)
-            for j in range(rays.shape[1]):
-                for r in range(ss):
-                    s = pk * per_packet + j * ss + r
-                    if s < n_rays and hit_prim[j, r] < 0:
-                        out_vis[order[s]] = F1
+                        if visibility:
+                            if hit_prim[j, r] < 0:
+                                out_vis[i] = F1
+                        else:
+                            out_t[i] = hit_t[j, r]
+                            out_prim[i] = hit_prim[j, r]
+                            out_b1[i] = hit_b1[j, r]
+                            out_b2[i] = hit_b2[j, r]

@@ -1,12 +1,29 @@
 """Tiles handed to the cores with dynamic load balancing.
 
-One prange iteration per thread; each thread allocates its packet scratch once
-and then pulls tile (or packet) indices from a shared atomic counter
-(_jit.fetch_add) until none are left, so a thread that drew cheap tiles (sky)
-takes more of them. Tiles are square, a multiple of the packet size, and many
-more than the threads.
+One prange iteration per thread; each thread allocates its scratch once and
+then pulls work items (camera tiles, ray packets, chunks of single rays) from
+one queue, a shared atomic counter (new_queue, next_tile), until none are
+left, so a thread that drew cheap items (sky) takes more of them. Every
+traversal, grid and kd-tree, pulls its work this way. Tiles are square, a
+multiple of the packet size, and many more than the threads.
 """
-from ._jit import kernel
+import numpy as np
+
+from ._jit import fetch_add, helper, kernel
+
+
+@helper
+def new_queue():
+    """An empty work queue: the counter next_tile advances."""
+    return np.zeros(1, np.int64)
+
+
+@helper
+def next_tile(queue, n_items):
+    """The next unclaimed item of 0..n_items-1, or -1 when all are taken
+    (atomic: every item goes to exactly one thread)."""
+    item = fetch_add(queue, 0, 1)
+    return item if item < n_items else -1
 
 
 def tile_size_for(width: int, height: int, packet: int, threads: int) -> int:

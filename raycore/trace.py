@@ -6,8 +6,8 @@ import numpy as np
 
 from .config import EPS_CULL_REL, PACKET_SIZES
 from .grid_build import Grid
-from .grid_cgt import N_COUNTERS
-from .grid_drivers import trace_ordered, trace_primary, trace_ray_batch
+from .counters import N_COUNTERS
+from .grid_drivers import trace_primary, trace_ray_batch
 from .packet_layout import swizzle_offsets, unswizzle
 from .shadow_packets import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
@@ -94,8 +94,8 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
     sw_t, sw_prim, sw_b1, sw_b2 = out.swizzled
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     trace_primary(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
-                  packet, sub, tile, threads, *grid[:5], grid.cell_start, grid.cell_tris,
-                  tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
+                  packet, sub, tile, threads, grid, tri_verts, _cull_eps(grid),
+                  sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
     flat = (sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1))
     if not row_major:
         return Hits(*flat, counters.sum(axis=0))
@@ -104,6 +104,8 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
     return Hits(h.t, h.prim, h.b1, h.b2, counters.sum(axis=0))
 
 
+# hit outputs trace_ray_batch does not write: shadow rays give visibility only
+NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32))
 NO_SMOOTH = (np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
 
 
@@ -118,9 +120,9 @@ def light_visibility(grid: Grid, tri_verts, rays: LightRays, vis=None, packet=SH
     vis[:] = 0.0
     n_packets = max(1, -(-rays.n_active // (packet * packet)))
     counters = np.zeros((n_packets, N_COUNTERS), np.int64)
-    trace_ordered(rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
-                  rays.shared_origin, packet, sub, threads, *grid[:5], grid.cell_start,
-                  grid.cell_tris, tri_verts, _cull_eps(grid), vis, counters, cull)
+    trace_ray_batch(rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
+                    packet, sub, threads, True, rays.shared_origin, grid, tri_verts, _cull_eps(grid),
+                    *NO_HITS, vis, counters, cull)
     return vis, counters.sum(axis=0)
 
 
@@ -169,7 +171,6 @@ def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, pac
     counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
     order = np.arange(n, dtype=np.int32)
     trace_ray_batch(order, n, np.ascontiguousarray(origins.T), np.ascontiguousarray(dirs.T), t_min, t_max,
-                    packet, sub, threads, any_hit,
-                    *grid[:5], grid.cell_start, grid.cell_tris, tri_verts, _cull_eps(grid),
-                    out_t, out_prim, out_b1, out_b2, counters, True)
+                    packet, sub, threads, any_hit, False, grid, tri_verts, _cull_eps(grid),
+                    out_t, out_prim, out_b1, out_b2, NO_HITS[0], counters, True)
     return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))

@@ -9,7 +9,8 @@ from conftest import icosphere_mesh, soup, tri_verts_of
 from oracles import brute_force_closest, camera_rays
 from raycore.camera import camera_basis
 from raycore.kdtree_build import LEAF, build_kdtree
-from raycore.kdtree_trace import frustum_misses_box, kd_trace_camera, kd_trace_rays
+from raycore.kdtree_packets import frustum_misses_box, kd_trace_camera
+from raycore.kdtree_rays import kd_trace_rays
 
 
 def _brute(tv, o, d, t_max=None):

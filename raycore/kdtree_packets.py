@@ -1,6 +1,6 @@
-"""Kd-tree traversal: single rays (the reference) and frustum packets in the
-style of the multi-level ray tracing algorithm (MLRTA, Reshetov, Soupikov,
-Hurley 2005).
+"""Kd-tree traversal of camera packets: frustum packets in the style of the
+multi-level ray tracing algorithm (MLRTA, Reshetov, Soupikov, Hurley 2005).
+Single rays, the reference, are in kdtree_rays.py.
 
 Camera packets share the eye and their unnormalised directions are affine in
 the pixel position, so every per-axis quantity of the packet (direction
@@ -25,126 +25,18 @@ watertight along any axis the directions do not vanish on).
 import numpy as np
 from numba import prange
 
-from ._jit import fetch_add, helper, kernel, parallel_kernel
+from ._jit import helper, kernel, parallel_kernel
 from .camera import primary_dir_raw
-from .config import EPS_KD_SPLIT_REL
+from .counters import CANDIDATES, FALLBACK_RAYS, N_COUNTERS, PACKETS, TESTS, VISITS
 from .kdtree_build import LEAF, KdTree
+from .kdtree_rays import STACK, trace_one
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
 INF = np.float32(np.inf)
-STACK = 128
-N_KD_COUNTERS = 5                 # packets, nodes visited, tests, leaves, single rays
 
-
-@helper
-def _slab(o, d, lo, hi, t0, t1):
-    """Parametric interval of ray (o, d) inside box [lo, hi], clipped to [t0, t1]."""
-    for a in range(3):
-        if d[a] == F0:
-            if o[a] < lo[a] or o[a] > hi[a]:
-                return F1, F0
-            continue
-        inv = F1 / d[a]
-        ta = (lo[a] - o[a]) * inv
-        tb = (hi[a] - o[a]) * inv
-        if ta > tb:
-            ta, tb = tb, ta
-        t0 = max(t0, ta)
-        t1 = min(t1, tb)
-    return t0, t1
-
-
-@kernel
-def trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_verts,
-              ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack_n, stack_t0, stack_t1, counters, row):
-    """Closest (or any) hit of one ray: (t, prim, b1, b2); prim -1 = none in (t_min, t_max)."""
-    o = (ox, oy, oz)
-    d = (dx, dy, dz)
-    best_t, best_p, best_b1, best_b2 = t_max, -1, F0, F0
-    t0, t1 = _slab(o, d, lo, hi, t_min, t_max)
-    if not t0 <= t1:
-        return best_t, best_p, best_b1, best_b2
-    kx, ky, kz = ray_axes(dx, dy, dz)
-    sz = F1 / d[kz]
-    sx = d[kx] * sz
-    sy = d[ky] * sz
-    node = 0
-    top = 0
-    while True:
-        while tree_axis[node] != LEAF:
-            counters[row, 1] += 1
-            a = tree_axis[node]
-            sp = tree_split[node]
-            left = tree_child[node]
-            if o[a] < sp or (o[a] == sp and d[a] <= F0):
-                near, far = left, left + 1
-            else:
-                near, far = left + 1, left
-            if d[a] == F0:
-                node = near
-                continue
-            t = (sp - o[a]) / d[a]
-            tol = EPS_KD_SPLIT_REL * (abs(t0) + abs(t1))
-            if t <= F0 or t > t1 + tol:
-                node = near
-            elif t < t0 - tol:
-                node = far
-            else:
-                stack_n[top] = far
-                stack_t0[top] = max(t0, t - tol)
-                stack_t1[top] = t1
-                top += 1
-                node = near
-                t1 = min(t1, t + tol)
-        counters[row, 1] += 1
-        counters[row, 3] += 1
-        first = tree_child[node]
-        for k in range(first, first + tree_count[node]):
-            tri = refs[k]
-            counters[row, 2] += 1
-            hit, t, b1, b2 = woop_test(
-                tri_verts[tri, kx] - o[kx], tri_verts[tri, ky] - o[ky], tri_verts[tri, kz] - o[kz],
-                tri_verts[tri, 3 + kx] - o[kx], tri_verts[tri, 3 + ky] - o[ky], tri_verts[tri, 3 + kz] - o[kz],
-                tri_verts[tri, 6 + kx] - o[kx], tri_verts[tri, 6 + ky] - o[ky], tri_verts[tri, 6 + kz] - o[kz],
-                sx, sy, sz)
-            if hit and t > t_min and t < best_t:
-                best_t, best_p, best_b1, best_b2 = t, tri, b1, b2
-                if any_hit:
-                    return best_t, best_p, best_b1, best_b2
-        # skip stacked nodes that start beyond the best hit so far
-        while True:
-            if top == 0:
-                return best_t, best_p, best_b1, best_b2
-            top -= 1
-            if best_t >= stack_t0[top]:
-                node, t0, t1 = stack_n[top], stack_t0[top], stack_t1[top]
-                break
-
-
-@parallel_kernel
-def trace_kd_rays(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_verts,
-                  origins, dirs, t_min, t_max, any_hit, out_t, out_prim, out_b1, out_b2, counters):
-    """Single-ray traversal of arbitrary rays, in parallel (the reference)."""
-    n = origins.shape[0]
-    n_chunks = counters.shape[0]
-    for c in prange(n_chunks):
-        stack_n = np.empty(STACK, np.int32)
-        stack_t0 = np.empty(STACK, np.float32)
-        stack_t1 = np.empty(STACK, np.float32)
-        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            t, p, b1, b2 = trace_one(tree_axis, tree_split, tree_child, tree_count, refs, lo, hi,
-                                     tri_verts, origins[i, 0], origins[i, 1], origins[i, 2],
-                                     dirs[i, 0], dirs[i, 1], dirs[i, 2], t_min[i], t_max[i],
-                                     any_hit, stack_n, stack_t0, stack_t1, counters, c)
-            out_t[i] = t if p >= 0 else INF
-            out_prim[i] = p
-            out_b1[i] = b1
-            out_b2[i] = b2
-
-
-# ---------------------------------------------------------------- frusta ---
 
 @kernel
 def frustum_of(cam, x0, y0, x1, y1, jx, jy, fr):
@@ -209,10 +101,11 @@ def _child_box(box, a, sp, upper, out):
 
 
 @kernel
-def entry_point(tree_axis, tree_split, tree_child, lo, hi, o, fr, box, scratch):
+def entry_point(tree, o, fr, box, scratch):
     """Deepest node whose box contains the whole frustum's path through the
     tree (every ray that reaches a leaf reaches it through this node); its box
     is left in `box`. Returns (node, steps taken)."""
+    lo, hi, tree_axis, tree_split, tree_child = tree.lo, tree.hi, tree.axis, tree.split, tree.child
     for q in range(3):
         box[q] = lo[q]
         box[3 + q] = hi[q]
@@ -242,7 +135,7 @@ def entry_point(tree_axis, tree_split, tree_child, lo, hi, o, fr, box, scratch):
 
 @kernel
 def frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, best_b2,
-                 ep, ep_box, tree_axis, tree_split, tree_child, tree_count, refs, tri_verts,
+                 ep, ep_box, tree, tri_verts,
                  stack_n, stack_box, scratch, mailbox, counters, row):
     """Walk n rays sharing origin o (frustum bounds fr, shear ray_s per ray on
     the common axes kx, ky, kz) through the tree from node ep (box ep_box),
@@ -254,6 +147,7 @@ def frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, bes
     through this walk (8x8 blocks, frustum bounds from all 64 directions,
     any-hit): 2x slower than single rays on hand and toys and 23x on the
     runner, where blocks straddling a silhouette diverge. They use trace_one."""
+    tree_axis, tree_split, tree_child, tree_count, refs = tree.axis, tree.split, tree.child, tree.count, tree.refs
     for m in range(mailbox.shape[0]):
         mailbox[m] = -1
     stack_n[0] = ep
@@ -268,7 +162,7 @@ def frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, bes
             far_t = max(far_t, best_t[r])
         if frustum_misses_box(o, fr, stack_box[top], far_t):
             continue
-        counters[row, 1] += 1
+        counters[row, VISITS] += 1
         if tree_axis[node] != LEAF:
             a = tree_axis[node]
             sp = tree_split[node]
@@ -285,7 +179,7 @@ def frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, bes
                     stack_box[top, q] = scratch[side, q]
                 top += 1
             continue
-        counters[row, 3] += 1
+        counters[row, CANDIDATES] += 1
         first = tree_child[node]
         for k in range(first, first + tree_count[node]):
             tri = refs[k]
@@ -307,7 +201,7 @@ def frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, bes
             cx = tri_verts[tri, 6 + kx] - o[kx]
             cy = tri_verts[tri, 6 + ky] - o[ky]
             cz = tri_verts[tri, 6 + kz] - o[kz]
-            counters[row, 2] += n
+            counters[row, TESTS] += n
             for r in range(n):
                 hit, t, b1, b2 = woop_test(ax, ay, az, bx, by, bz, cx, cy, cz, ray_s[r, 0], ray_s[r, 1], ray_s[r, 2])
                 better = hit & (t > t_lo[r]) & (t < best_t[r])
@@ -328,11 +222,11 @@ def _shear(ray_d, n, kx, ky, kz, ray_s):
 
 @kernel
 def _packet(cam, px, py, size, width, height, jx, jy, ep, ep_box, fr,
-            tree_axis, tree_split, tree_child, tree_count, refs, tri_verts,
+            tree, tri_verts,
             stack_n, stack_box, scratch, ray_d, ray_s, t_lo, best_t, best_p, best_b1, best_b2, mailbox,
             out_t, out_prim, out_b1, out_b2, counters, row):
     """Trace the size x size camera packet at (px, py) from node ep (box ep_box)."""
-    counters[row, 0] += 1
+    counters[row, PACKETS] += 1
     o = (cam[0], cam[1], cam[2])
     n = 0
     for yy in range(size):
@@ -348,7 +242,7 @@ def _packet(cam, px, py, size, width, height, jx, jy, ep, ep_box, fr,
     kx, ky, kz = ray_axes(dc[0], dc[1], dc[2])
     _shear(ray_d, n, kx, ky, kz, ray_s)
     frustum_walk(o, fr, n, ray_s, kx, ky, kz, t_lo, best_t, best_p, best_b1, best_b2,
-                 ep, ep_box, tree_axis, tree_split, tree_child, tree_count, refs, tri_verts,
+                 ep, ep_box, tree, tri_verts,
                  stack_n, stack_box, scratch, mailbox, counters, row)
     r = 0
     for yy in range(size):
@@ -366,16 +260,14 @@ def _packet(cam, px, py, size, width, height, jx, jy, ep, ep_box, fr,
 
 
 @parallel_kernel
-def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers,
-                    tree_axis, tree_split, tree_child, tree_count, refs, lo, hi, tri_verts,
+def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers, tree, tri_verts,
                     out_t, out_prim, out_b1, out_b2, counters):
     """Camera rays through the kd-tree: tiles pulled from a shared counter;
     per tile an entry point, per packet a frustum walk from it, split where
     the corner-ray conditions fail (down to single rays)."""
-    tiles_x = (width + tile_size - 1) // tile_size
-    n_tiles = tiles_x * ((height + tile_size - 1) // tile_size)
-    next_tile = np.zeros(1, np.int64)
-    for w in prange(n_workers):
+    tiles_x, n_tiles = tile_count(width, height, tile_size)
+    queue = new_queue()
+    for _w in prange(n_workers):
         fr = np.empty((3, 4), np.float32)
         fr_tile = np.empty((3, 4), np.float32)
         ep_box = np.empty(6, np.float32)
@@ -396,20 +288,19 @@ def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers,
         todo = np.empty((64, 3), np.int64)      # pending (x, y, size) sub-frusta
         o = (cam[0], cam[1], cam[2])
         while True:
-            tile = fetch_add(next_tile, 0, 1)
-            if tile >= n_tiles:
+            tile = next_tile(queue, n_tiles)
+            if tile < 0:
                 break
-            tx = (tile % tiles_x) * tile_size
-            ty = (tile // tiles_x) * tile_size
+            tx, ty = tile_corner(tile, tiles_x, tile_size)
             x1 = min(tx + tile_size, width) - 1
             y1 = min(ty + tile_size, height) - 1
             ep = 0
             for q in range(3):
-                ep_box[q] = lo[q]
-                ep_box[3 + q] = hi[q]
+                ep_box[q] = tree.lo[q]
+                ep_box[3 + q] = tree.hi[q]
             if frustum_of(cam, tx, ty, x1 + 1, y1 + 1, F0, F0, fr_tile):
-                ep, steps = entry_point(tree_axis, tree_split, tree_child, lo, hi, o, fr_tile, ep_box, scratch)
-                counters[tile, 1] += steps
+                ep, steps = entry_point(tree, o, fr_tile, ep_box, scratch)
+                counters[tile, VISITS] += steps
             for py in range(ty, y1 + 1, packet):
                 for px in range(tx, x1 + 1, packet):
                     todo[0, 0], todo[0, 1], todo[0, 2] = px, py, packet
@@ -422,7 +313,7 @@ def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers,
                         ok = frustum_of(cam, x, y, x + size, y + size, F0, F0, fr)
                         if ok and size > 1:
                             _packet(cam, x, y, size, width, height, jx, jy, ep, ep_box, fr,
-                                    tree_axis, tree_split, tree_child, tree_count, refs, tri_verts,
+                                    tree, tri_verts,
                                     stack_n, stack_box, scratch, ray_d, ray_s, t_lo, best_t, best_p,
                                     best_b1, best_b2, mailbox, out_t, out_prim, out_b1, out_b2,
                                     counters, tile)
@@ -435,9 +326,8 @@ def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers,
                                 n_todo += 1
                         else:                               # a single ray
                             d = primary_dir_raw(cam, x, y, jx, jy)
-                            counters[tile, 4] += 1
-                            t, p, b1, b2 = trace_one(tree_axis, tree_split, tree_child, tree_count, refs,
-                                                     lo, hi, tri_verts, o[0], o[1], o[2], d[0], d[1], d[2],
+                            counters[tile, FALLBACK_RAYS] += 1
+                            t, p, b1, b2 = trace_one(tree, tri_verts, o[0], o[1], o[2], d[0], d[1], d[2],
                                                      F0, INF, False, stack_n, stack_t0, stack_t1,
                                                      counters, tile)
                             norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
@@ -448,24 +338,6 @@ def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers,
                             out_b2[i] = b2 if p >= 0 else F0
 
 
-def tree_args(tree: KdTree):
-    return (tree.axis, tree.split, tree.child, tree.count, tree.refs, tree.lo, tree.hi)
-
-
-def kd_trace_rays(tree: KdTree, tri_verts, origins, dirs, t_min=None, t_max=None, any_hit=False):
-    """(t, prim, b1, b2, counters) of arbitrary rays by single-ray traversal."""
-    import numba
-    origins = np.ascontiguousarray(origins, np.float32)
-    dirs = np.ascontiguousarray(dirs, np.float32)
-    n = len(origins)
-    t_min = np.zeros(n, np.float32) if t_min is None else np.ascontiguousarray(t_min, np.float32)
-    t_max = np.full(n, np.inf, np.float32) if t_max is None else np.ascontiguousarray(t_max, np.float32)
-    out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
-    counters = np.zeros((max(1, numba.get_num_threads() * 4), N_KD_COUNTERS), np.int64)
-    trace_kd_rays(*tree_args(tree), tri_verts, origins, dirs, t_min, t_max, any_hit, *out, counters)
-    return (*out, counters.sum(axis=0))
-
-
 def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitter=(0.5, 0.5), tile=32):
     """Row-major (t, prim, b1, b2, counters) of the camera rays: t along the
     unit ray, as the grid's trace_camera gives it."""
@@ -474,19 +346,7 @@ def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitte
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     tile = max(tile, packet)
     n_tiles = -(-width // tile) * -(-height // tile)
-    counters = np.zeros((n_tiles, N_KD_COUNTERS), np.int64)
+    counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     trace_camera_kd(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), packet, tile,
-                    numba.get_num_threads(), *tree_args(tree), tri_verts, *out, counters)
+                    numba.get_num_threads(), tree, tri_verts, *out, counters)
     return (*out, counters.sum(axis=0))
-
-
-def kd_light_visibility(tree: KdTree, tri_verts, rays, vis):
-    """light_visibility's kd-tree twin: the same shadow rays (shadow_packets.
-    LightRays), one any-hit single ray each, in the light-space order."""
-    vis[:] = 0.0
-    idx = rays.order[:rays.n_active]
-    t, prim, _, _, counters = kd_trace_rays(tree, tri_verts, rays.origin[:, idx].T,
-                                            rays.direction[:, idx].T, rays.t_min[idx],
-                                            rays.t_max[idx], any_hit=True)
-    vis[idx] = (prim < 0).astype(np.float32)
-    return vis, counters
