@@ -4,7 +4,7 @@ An area light is `samples` isotropic point emitters, each with 1/samples of
 its intensity, spread evenly over a rectangle (corner + u edge_u + v edge_v)
 or over the surface of a sphere (center, radius). The points are the Halton
 sequence in bases 2 and 3, the same for every pixel, so that emitter k's
-shadow rays are one coherent set of light-space packets (shadow_packets.py,
+shadow rays are one coherent set of light-space packets (shadow_rays.py,
 as for a point light). Halton rather than Hammersley: every prefix of it is
 spread over the whole light too, so the first emitters serve as probes of
 it (render.light_probes, frame.py).

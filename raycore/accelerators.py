@@ -5,7 +5,7 @@ structure once and never asks which one it has.
 
   GridAccel  the per-frame uniform grid: camera packets by Coherent Grid
              Traversal (grid_drivers.py), shadow rays in light-space packets
-             (shadow_packets.py), ray batches in packets;
+             (shadow_rays.py), ray batches in packets;
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
              shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py).
 
@@ -40,7 +40,7 @@ class GridAccel:
         return hits._replace(counters=Counters.of(hits.counters)), (self.buffers.row_off, self.buffers.col_off)
 
     def trace_shadows(self, rays, vis) -> Counters:
-        """vis[i] = 1 where shadow ray i (shadow_packets.LightRays) reaches its light, else 0."""
+        """vis[i] = 1 where shadow ray i (shadow_rays.LightRays) reaches its light, else 0."""
         _, c = light_visibility(self.grid, self.tri_verts, rays, vis, cull=self.cull)
         return Counters.of(c)
 

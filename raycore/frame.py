@@ -16,7 +16,7 @@ from .config import RenderConfig
 from .kdtree_build import build_kdtree
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
-from .shadow_packets import LightRays
+from .shadow_rays import LightRays
 from .surface import visible_surface
 from .trace import camera_buffers
 from .workspace import Workspace
@@ -138,7 +138,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     Per pass of camera rays (one per sample offset): trace, gather the visible
     surface once (surface.py), trace each light's shadow rays in light-space
-    packets (shadow_packets.py), shade the samples, scatter them into the image."""
+    packets (shadow_rays.py), shade the samples, scatter them into the image."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):

@@ -154,7 +154,7 @@ def kd_trace_rays(tree: KdTree, tri_verts, origins, dirs, t_min=None, t_max=None
 
 
 def kd_light_visibility(tree: KdTree, tri_verts, rays, vis):
-    """light_visibility's kd-tree twin: the same shadow rays (shadow_packets.
+    """light_visibility's kd-tree twin: the same shadow rays (shadow_rays.
     LightRays), one any-hit single ray each, in the light-space order."""
     vis[:] = 0.0
     idx = rays.order[:rays.n_active]

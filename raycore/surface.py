@@ -52,6 +52,14 @@ class Surface(NamedTuple):
 
 
 @helper
+def store3(rows, i, x, y, z):
+    """Column i of a (3, n) structure-of-arrays block."""
+    rows[0, i] = x
+    rows[1, i] = y
+    rows[2, i] = z
+
+
+@helper
 def sample_texture(tex_data, tex_info, tex, u, v):
     """Bilinear lookup with wrap-around; v = 0 is the bottom row. float32
     coordinates (an int64 size would turn them float64) and a +-w wrap, since
@@ -161,19 +169,11 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_st
                 else:
                     sx, sy, sz = gx, gy, gz
                 lx, ly, lz = px + qx, py + qy, pz + qz
-                point[0, i] = px
-                point[1, i] = py
-                point[2, i] = pz
-                lifted[0, i] = lx
-                lifted[1, i] = ly
-                lifted[2, i] = lz
+                store3(point, i, px, py, pz)
+                store3(lifted, i, lx, ly, lz)
                 mag[i] = max(m, abs(lx), abs(ly), abs(lz))
-                geo_n[0, i] = gx
-                geo_n[1, i] = gy
-                geo_n[2, i] = gz
-                smooth_n[0, i] = sx
-                smooth_n[1, i] = sy
-                smooth_n[2, i] = sz
+                store3(geo_n, i, gx, gy, gz)
+                store3(smooth_n, i, sx, sy, sz)
                 # material, texture applied
                 mat = tri_material[prim]
                 kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]

@@ -9,7 +9,7 @@ from .grid_build import Grid
 from .counters import N_COUNTERS
 from .grid_drivers import trace_primary, trace_ray_batch
 from .packet_layout import swizzle_offsets, unswizzle
-from .shadow_packets import SHADOW_PACKET, LightRays
+from .shadow_rays import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
 from .tile_queue import tile_size_for
 

@@ -1,5 +1,6 @@
 """Watertight ray/triangle test."""
 import numpy as np
+import pytest
 
 from conftest import icosphere_mesh, tri_verts_of
 from oracles import brute_force_closest
@@ -39,13 +40,17 @@ def test_degenerate_and_sliver_triangles_give_no_nan():
                    [0, 0, 0, 0, 0, 0, 0, 0, 0],           # a point
                    [0, 0, 0, 1, 0, 0, 0.5, 1e-7, 0]],     # sliver
                   np.float32)
+    # from (0.5, 0, 1): zero-area triangles are never hit; the sliver is hit
+    # straight down on its long edge and, along (0.5, 0, -1), on its vertex
+    # (1, 0, 0), both inclusive; upward it is missed
+    expected = {(2, 0): (1.0, 0.5), (2, 2): (1.0, 1.0)}
     for tri in range(3):
-        for d in ([0, 0, -1], [1, 1, 1], [0.5, 0.0, -1]):
+        for k, d in enumerate(([0, 0, -1], [1, 1, 1], [0.5, 0.0, -1])):
             hit, t, b1, b2 = intersect_ray(np.float32(0.5), np.float32(0.0), np.float32(1.0),
                                            *np.asarray(d, np.float32), tv, tri,
                                            np.float32(0), np.float32(np.inf))
-            if hit:
-                assert np.isfinite(t) and np.isfinite(b1) and np.isfinite(b2)
+            assert hit == ((tri, k) in expected)
+            assert not hit or (t, b1) == pytest.approx(expected[tri, k]) and np.isfinite(b2)
     hit, *_ = intersect_ray(np.float32(0.5), np.float32(1e-8), np.float32(1.0),
                             np.float32(0), np.float32(0), np.float32(-1), tv, 0,
                             np.float32(0), np.float32(np.inf))
