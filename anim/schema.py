@@ -104,6 +104,10 @@ class Render(Strict):
     # area lights: trace this many emitters for every point first, and the
     # rest only where they disagree (the penumbra); 0 = every emitter everywhere
     light_probes: Annotated[int, Field(ge=0, le=4096)] = 0
+    # error budget per pixel (linear RGBA units): start at 1 spp, give more
+    # samples (up to spp, or 64 when spp is 1) only where the estimated error
+    # is above it; 0 = off (raycore/adaptive.py)
+    max_error: Annotated[float, Field(ge=0, le=1)] = 0.0
 
     @field_validator("packet")
     @classmethod

@@ -42,16 +42,28 @@ def print_report(report):
     image = report.get("image")
     if image:
         for study, knob in (("spp", "spp"), ("light_samples", "light_samples")):
+            ref = image["ref_spp"] if knob == "spp" else image["ref_light_samples"]
             for name, rows in image[study].items():
-                table = Table(title=f"{name}: image error vs {knob} ({image['resolution']}², against "
-                                    f"{image['ref_' + ('spp' if knob == 'spp' else 'light_samples')]}; "
-                                    f"slope of log RMSE vs log ms {image['slopes'][f'{name.split()[0]} ' + knob.replace('_', ' ')]:.2f})")
-                for col in (knob, "ms/frame", "RMSE", "max", "PSNR dB"):
+                table = Table(title=f"{name}: image error vs {knob.replace('_', ' ')} ({image['resolution']}², "
+                                    f"against {ref}; slope of log RMSE vs log ms "
+                                    f"{image['slopes'][f'{name} ' + knob.replace('_', ' ')]:.2f})")
+                for col in (knob, "ms/frame", "rays", "RMSE", "max", "PSNR dB"):
                     table.add_column(col, justify="right")
                 for r in rows:
-                    table.add_row(str(r[knob]), f"{r['ms']:.1f}", f"{r['rmse']:.2e}", f"{r['max']:.2e}",
-                                  f"{r['psnr']:.1f}")
+                    table.add_row(str(r[knob]), f"{r['ms']:.1f}", f"{r['rays']:,}", f"{r['rmse']:.2e}",
+                                  f"{r['max']:.2e}", f"{r['psnr']:.1f}")
                 console.print(table)
+        for name, rows in image.get("budget", {}).items():
+            table = Table(title=f"{name}: error budget (render.max_error) against uniform spp: rays for "
+                                f"the same RMSE")
+            for col in ("max_error", "ms/frame", "rays", "RMSE", "max", "PSNR dB", "uniform rays", "ray savings"):
+                table.add_column(col, justify="right")
+            for r in rows:
+                same = r["uniform_rays_same_rmse"]
+                table.add_row(f"{r['max_error']:g}", f"{r['ms']:.1f}", f"{r['rays']:,}", f"{r['rmse']:.2e}",
+                              f"{r['max']:.2e}", f"{r['psnr']:.1f}", f"{same:,.0f}" if same else "out of range",
+                              f"{r['ray_savings']:.2f}x" if r["ray_savings"] else "-")
+            console.print(table)
         console.print("expected slopes: " + ", ".join(f"{k} {v}" for k, v in image["expected_slopes"].items()))
     precision = report.get("precision")
     if precision:
@@ -75,7 +87,7 @@ def write_report(report, plot_path: Path, json_path: Path):
     json_path.parent.mkdir(parents=True, exist_ok=True)
     json_path.write_text(json.dumps(report, indent=1))
     plot_path.parent.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 4, figsize=(21, 5))
+    fig, axes = plt.subplots(1, 5, figsize=(26, 5))
     for name, res in report["scenes"].items():
         for method in res["orders"]:
             rows = [r for r in res["rows"] if r["method"] == method]
@@ -101,15 +113,22 @@ def write_report(report, plot_path: Path, json_path: Path):
     axes[2].set(ylabel="lowest height (floor at 0)", title="bounce: through the floor?")
     axes[2].legend(fontsize=7)
     image = report.get("image") or {}
-    for study, knob in (("spp", "spp"), ("light_samples", "light samples")):
+    for study, knob, style in (("spp", "spp", "o-"), ("budget", "budget", "s--"),
+                               ("light_samples", "light samples", "^:")):
         for name, rows in image.get(study, {}).items():
-            key = f"{name.split()[0]} {knob}"
-            axes[3].loglog([r["ms"] for r in rows], [r["rmse"] for r in rows], "o-",
+            key = f"{name} {knob}"
+            axes[3].loglog([r["ms"] for r in rows], [r["rmse"] for r in rows], style,
                            label=f"{name}: {knob} (slope {image['slopes'][key]:.2f})")
     axes[3].set(xlabel="ms per frame (expected slopes: -0.5 random, -0.75 stratified)",
                 ylabel="image RMSE (linear RGB)", title="image error vs run time")
+    for study, style in (("spp", "o-"), ("budget", "s--")):
+        for name, rows in image.get(study, {}).items():
+            axes[4].loglog([r["rays"] for r in rows], [r["rmse"] for r in rows], style, label=f"{name}: {study}")
+    axes[4].set(xlabel="rays per frame (camera + shadow)", ylabel="image RMSE (linear RGB)",
+                title="uniform spp and the error budget: error vs rays")
     if image:
         axes[3].legend(fontsize=7)
+        axes[4].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(plot_path, dpi=110)
     plt.close(fig)

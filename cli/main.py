@@ -169,6 +169,10 @@ def parse_frames(text, scene):
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
+@click.option("--max-error", type=click.FloatRange(0, 1), metavar="E",
+              help="Error budget per pixel in linear RGBA (default: render.max_error, 0 = off): start at the "
+                   "pixel centre and give more samples, up to --spp (64 when spp is 1), only to pixels "
+                   "whose estimated error is above E.")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames); merged with an earlier run's by frame number.")
 @click.option("--resume", is_flag=True, help="Skip frames already written whole (a truncated or foreign file is rendered again); "
                                             "--resume renders into one directory share the frames.")
@@ -180,8 +184,8 @@ def parse_frames(text, scene):
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the frames as one animated .gif or .webp (tone-mapped, at most 640 px) "
                    "to look at.")
-def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, stats_path,
-           resume, overwrite, quiet, res, preview_path):
+def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, max_error,
+           stats_path, resume, overwrite, quiet, res, preview_path):
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
@@ -203,7 +207,7 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
         click.echo(f"frustrace: warning: --packet is for the grid; the kd-tree traces "
                    f"{KD_PACKET}x{KD_PACKET} packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
-                    shadows=spec.render.shadows and not no_shadows, accel=accel, width=width, height=height)
+                    max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, width=width, height=height)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"

@@ -42,6 +42,13 @@ EPS_KD_SPLIT_REL = np.float32(1e-6)
 EPS_KD_BOX_REL = np.float32(1e-6)
 
 
+# an error budget (render.max_error) with spp 1 lets a pixel take up to this
+# many samples (its rounds end at 7, 15, 31, 63): a pixel still above the
+# budget after 63 stratified samples holds a sub-pixel feature that more
+# samples resolve only slowly (README, bench --error)
+ADAPTIVE_SPP_CAP = 64
+
+
 @dataclass(frozen=True)
 class RenderConfig:
     width: int = 512               # image width in pixels
@@ -57,3 +64,4 @@ class RenderConfig:
     aovs: tuple = ()               # extra EXR channels: "N", "P", "id"
     grid_cull: bool = True         # grid: frustum culling and mailboxes (off only to measure them)
     light_probes: int = 0          # area lights: trace this many emitters first, the rest only in penumbrae (0 = all)
+    max_error: float = 0.0         # error budget per pixel (linear RGBA); > 0: adaptive samples, spp the cap

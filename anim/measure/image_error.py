@@ -2,7 +2,8 @@
 time, for the knobs that trade one for the other.
 
 * samples per pixel (Hammersley sub-pixel samples) 1..64, against a
-  reference of REF_SPP samples;
+  reference of REF_SPP samples, and the error budget (render.max_error) at
+  MAX_ERRORS, with the rays uniform sampling needs for the same RMSE;
 * area-light samples 1..64 (emitters, each one more shadow pass), on the
   scene with its first point light made a 1x1 area light, against
   REF_LIGHT_SAMPLES emitters.
@@ -28,12 +29,15 @@ SPPS = (1, 2, 4, 8, 16, 32, 64)
 REF_SPP = 256
 LIGHT_SAMPLES = (1, 2, 4, 8, 16, 32, 64)
 REF_LIGHT_SAMPLES = 512
+MAX_ERRORS = (0.04, 0.02, 0.01, 0.005, 0.0025)
+AREA_SAMPLES = 16          # the area light's samples in the area-lit scene's spp and budget studies
 RES = 192
 EXPECTED_SLOPES = {"random": -0.5, "stratified at edges": -0.75}
 
 
 def _frame(scene, t, res, repeats=3, **overrides):
-    """(rgb (H, W, 3) f64, median ms per frame) of the frame at t, compile excluded."""
+    """(rgb (H, W, 3) f64, median ms per frame, rays: camera + shadow) of the
+    frame at t, compile excluded."""
     cfg = config_of(scene, width=res, height=res, aovs=(), **overrides)
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     renderer.render(t)                                          # warm-up
@@ -43,7 +47,8 @@ def _frame(scene, t, res, repeats=3, **overrides):
         result = renderer.render(t)[1]
         ms.append((time.perf_counter() - t0) * 1e3)
         rgb = result.rgba[..., :3].astype(np.float64)
-    return rgb, float(np.median(ms))
+    rays = int(result.counters["rays"] + result.counters["shadow_rays"])
+    return rgb, float(np.median(ms)), rays
 
 
 def _error(rgb, ref):
@@ -63,12 +68,41 @@ def slope(rows, x="ms", y="rmse"):
 
 
 def spp_study(scene, t, res=RES):
-    ref, _ = _frame(scene, t, res, repeats=1, spp=REF_SPP)
+    """(rows for uniform spp, rows for the error budget), against one reference."""
+    ref = _frame(scene, t, res, repeats=1, spp=REF_SPP)[0]
     rows = []
     for spp in SPPS:
-        rgb, ms = _frame(scene, t, res, spp=spp)
-        rows.append({"spp": spp, "ms": ms, **_error(rgb, ref)})
+        rgb, ms, rays = _frame(scene, t, res, spp=spp)
+        rows.append({"spp": spp, "ms": ms, "rays": rays, **_error(rgb, ref)})
+    return rows, budget_study(scene, t, res, ref, rows)
+
+
+def budget_study(scene, t, res, ref, uniform_rows):
+    """The error budget (render.max_error) at MAX_ERRORS: error, ms, rays,
+    and the rays uniform spp needs for the same RMSE (log-log interpolated
+    along uniform_rows; None outside their range), so ray_savings =
+    uniform rays / budget rays."""
+    rows = []
+    for e in MAX_ERRORS:
+        rgb, ms, rays = _frame(scene, t, res, max_error=e)
+        err = _error(rgb, ref)
+        same = rays_for_rmse(uniform_rows, err["rmse"])
+        rows.append({"max_error": e, "ms": ms, "rays": rays, **err, "uniform_rays_same_rmse": same,
+                     "ray_savings": same / rays if same else None})
     return rows
+
+
+def rays_for_rmse(rows, rmse):
+    """Rays uniform sampling needs for `rmse`: log-log interpolation between
+    the two spp rows that bracket it (None if none do)."""
+    pts = sorted((r["rmse"], r["rays"]) for r in rows if r["rmse"] > 0)
+    for (e0, n0), (e1, n1) in zip(pts, pts[1:]):
+        if e0 <= rmse <= e1:
+            if e1 == e0:
+                return float(n0)
+            w = (np.log(rmse) - np.log(e0)) / (np.log(e1) - np.log(e0))
+            return float(np.exp(np.log(n0) + w * (np.log(n1) - np.log(n0))))
+    return None
 
 
 def area_lit(scene):
@@ -87,33 +121,43 @@ def light_samples_study(scene, index, t, res=RES):
     def with_samples(n):
         scene.spec.lights[index] = scene.spec.lights[index].model_copy(update={"samples": n})
     with_samples(REF_LIGHT_SAMPLES)
-    ref, _ = _frame(scene, t, res, repeats=1)
+    ref = _frame(scene, t, res, repeats=1)[0]
     rows = []
     for n in LIGHT_SAMPLES:
         with_samples(n)
-        rgb, ms = _frame(scene, t, res)
-        rows.append({"light_samples": n, "ms": ms, **_error(rgb, ref)})
+        rgb, ms, rays = _frame(scene, t, res)
+        rows.append({"light_samples": n, "ms": ms, "rays": rays, **_error(rgb, ref)})
     return rows
 
 
 def run_image_study(names, res=RES):
-    """{'spp': {scene: rows}, 'light_samples': {scene: rows}, 'slopes': {...}}
-    for the built-in scenes named; the area-light study on the first of them
-    that has a point light."""
+    """{'spp': {scene: rows}, 'budget': {scene: rows}, 'light_samples':
+    {scene: rows}, 'slopes': {...}} for the built-in scenes named; on the
+    first of them that has a point light, that light made an area light:
+    light samples 1..64, then spp and the error budget with AREA_SAMPLES."""
     out = {"resolution": res, "ref_spp": REF_SPP, "ref_light_samples": REF_LIGHT_SAMPLES,
-           "expected_slopes": EXPECTED_SLOPES, "spp": {}, "light_samples": {}, "slopes": {}}
+           "expected_slopes": EXPECTED_SLOPES, "spp": {}, "budget": {}, "light_samples": {}, "slopes": {}}
+
+    def pixel_studies(label, scene, t):
+        out["spp"][label], out["budget"][label] = spp_study(scene, t, res)
+        out["slopes"][f"{label} spp"] = slope(out["spp"][label])
+        out["slopes"][f"{label} budget"] = slope(out["budget"][label])
+
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
             if name not in builtin.ALL:
                 continue
             scene = AnimatedScene(builtin.get(name).write(Path(tmp) / name))
             t = scene.time_of(scene.frame_numbers[len(scene.frame_numbers) // 3])
-            out["spp"][name] = spp_study(scene, t, res)
-            out["slopes"][f"{name} spp"] = slope(out["spp"][name])
+            pixel_studies(name, scene, t)
             if not out["light_samples"]:
                 index = area_lit(scene)
                 if index is not None:
+                    label = f"{name} (area light)"
                     rows = light_samples_study(scene, index, t, res)
-                    out["light_samples"][f"{name} (area light)"] = rows
-                    out["slopes"][f"{name} light samples"] = slope(rows)
+                    out["light_samples"][label] = rows
+                    out["slopes"][f"{label} light samples"] = slope(rows)
+                    scene.spec.lights[index] = scene.spec.lights[index].model_copy(
+                        update={"samples": AREA_SAMPLES})
+                    pixel_studies(label, scene, t)
     return out

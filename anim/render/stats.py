@@ -68,6 +68,9 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             "fallback_rays": result.counters["fallback_rays"],
             **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
                else {"kd_nodes": result.counters["kd_nodes"]}),
+            # under an error budget: camera rays not spent against spp (the cap) everywhere
+            **({"rays_left_out": result.counters["rays_left_out"],
+                "spp_mean": result.counters["adaptive_spp_mean"]} if "rays_left_out" in result.counters else {}),
             "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
 
 
@@ -75,7 +78,8 @@ def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
     size the accelerator really used (the kd-tree's is always KD_PACKET)."""
     return {"accel": cfg.accel, "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
-            "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density}
+            "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
+            **({"max_error": cfg.max_error} if cfg.max_error > 0 else {})}
 
 
 PHASE_KEYS = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms")
