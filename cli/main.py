@@ -257,7 +257,8 @@ def _int_list(text, name, allowed=None):
 @main.command()
 @click.option("--scene", "scenes", default="all", show_default=True,
               help="Built-in scenes, comma-separated, or 'all': demo, hand, runner, toys, marbles, fairy, torus.")
-@click.option("--res", type=click.IntRange(16, 8192), default=1024, show_default=True, help="Image size N (NxN).")
+@click.option("--res", type=click.IntRange(16, 8192), help="Image size N (NxN); default 1024, and 192 for the "
+                                                           "image error study of --error.")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
               help="Frames per configuration (medians are reported; a warm-up frame comes first).")
 @click.option("--accel", default="grid", show_default=True, help="Acceleration structures, comma-separated: grid, kdtree.")
@@ -288,6 +289,7 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
     from raycore._jit import set_threads
 
     from .report import bench_table
+    res = res if res else (None if error_report else 1024)
     names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
     unknown = [n for n in names if n not in SCENE_NAMES]
     if unknown:
@@ -298,11 +300,12 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
         writable_file(plot_path, "the --plot image", PLOT_FORMATS)
     if error_report:
         from anim.measure.error_study import run_error_report
+        from anim.measure.image_error import RES as IMAGE_STUDY_RES
 
         from .error_bench import print_report, write_report
         plot_path = writable_file(plot_path or Path("interp_error.png"), "the --plot image", PLOT_FORMATS)
         json_path = writable_file(json_path or plot_path.with_suffix(".json"), "the --json file")
-        report = run_error_report(names)
+        report = run_error_report(names, res or IMAGE_STUDY_RES)
         if not report["scenes"]:
             raise click.BadParameter("none of these scenes knows its exact motion", param_hint="--scene")
         print_report(report)

@@ -128,3 +128,91 @@ def test_light_probes_buy_a_better_image_with_fewer_rays(tmp_path):
         (rays_probed, rays_uniform, rmse(probed), rmse(uniform))
     same, _ = frame(64, 64)                                 # probing all emitters = no probing
     np.testing.assert_array_equal(same, uniform)
+
+
+# ---- closed forms: a rectangle light above a floor, with and without a straight occluder edge
+
+LIGHT = dict(x0=-1.0, x1=1.0, z0=-1.0, z1=1.0, h=4.0, intensity=30.0)
+EDGE_X, EDGE_H = 0.0, 2.0          # occluder: the half-plane x < EDGE_X at height EDGE_H
+ALBEDO = 0.8                        # the default material's diffuse
+
+
+def corner_solid_angle(a, b, h):
+    """Solid angle of the rectangle [0, a] x [0, b] at height h, seen from
+    the point below its corner (0, 0); signed by a and b."""
+    return np.sign(a) * np.sign(b) * np.arctan(np.abs(a * b) / (h * np.sqrt(h * h + a * a + b * b)))
+
+
+def rect_solid_angle(px, pz, x0, x1, z0, z1, h):
+    f = lambda x, z: corner_solid_angle(x - px, z - pz, h)
+    return f(x1, z1) - f(x0, z1) - f(x1, z0) + f(x0, z0)
+
+
+def exact_floor_colour(px, pz, occluded):
+    """What a floor point receives from the light made of infinitely many
+    isotropic emitters: albedo (I / area) times the solid angle of the part
+    of the light it sees (for a horizontal light over a horizontal floor,
+    cos / d^2 over the light's area is exactly that solid angle). The
+    occluder hides the emitters with x < px + (EDGE_X - px) h / EDGE_H."""
+    L = LIGHT
+    x0 = np.full_like(px, L["x0"])
+    if occluded:
+        x0 = np.maximum(x0, px + (EDGE_X - px) * L["h"] / EDGE_H)
+    omega = np.where(x0 < L["x1"], rect_solid_angle(px, pz, x0, L["x1"], L["z0"], L["z1"], L["h"]), 0.0)
+    area = (L["x1"] - L["x0"]) * (L["z1"] - L["z0"])
+    return ALBEDO * L["intensity"] / area * omega
+
+
+def floor_render(tmp_path, samples, occluded):
+    """(colour R, floor points x, z) of the floor pixels, the light made of
+    `samples` emitters."""
+    (tmp_path / "floor.obj").write_text("v -20 0 -20\nv 20 0 -20\nv 20 0 20\nv -20 0 20\nf 1 3 2\nf 1 4 3\n")
+    (tmp_path / "occluder.obj").write_text(f"v -20 {EDGE_H} -20\nv {EDGE_X} {EDGE_H} -20\nv {EDGE_X} {EDGE_H} 20\n"
+                                           f"v -20 {EDGE_H} 20\nf 1 3 2\nf 1 4 3\n")
+    L = LIGHT
+    objects = "  - {name: floor, mesh: floor.obj}\n" + (
+        "  - {name: occluder, mesh: occluder.obj}\n" if occluded else "")
+    path = tmp_path / "closed_form.yaml"
+    path.write_text(f"""version: 1
+frames: {{start: 0, end: 0, fps: 1}}
+output: {{path: out/f_#.exr, resolution: [64, 48]}}
+camera: {{eye: [0, 1.5, 2.5], look_at: [0, 0, 0], fov: 70}}
+lights: [{{type: area, corner: [{L['x0']}, {L['h']}, {L['z0']}], edge_u: [{L['x1'] - L['x0']}, 0, 0],
+          edge_v: [0, 0, {L['z1'] - L['z0']}], intensity: {L['intensity']}, samples: {samples}}}]
+objects:
+{objects}""")
+    scene = AnimatedScene(path)
+    cfg = config_of(scene, aovs=("P",), ambient=0.0)
+    result = SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)[1]
+    y = result.aovs["P.Y"].reshape(-1)
+    floor = np.isfinite(result.z.reshape(-1)) & (np.abs(y) < 1e-3)
+    return (result.rgba[..., 0].reshape(-1)[floor], result.aovs["P.X"].reshape(-1)[floor],
+            result.aovs["P.Z"].reshape(-1)[floor])
+
+
+def test_a_square_lights_irradiance_on_a_plane_converges_to_the_closed_form(tmp_path):
+    errors = []
+    for samples in (4, 16, 64, 256):
+        red, x, z = floor_render(tmp_path, samples, occluded=False)
+        exact = exact_floor_colour(x, z, occluded=False)
+        errors.append(float(np.max(np.abs(red / exact - 1))))
+    assert errors[-1] < 5e-3, errors
+    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+
+
+def test_the_penumbra_of_a_straight_edge_converges_to_the_closed_form(tmp_path):
+    """Floor points see the light partly past the occluder's edge (x from
+    -1 to 1 here); the error of the emitter sum falls faster than 1 /
+    sqrt(samples) (independent random emitters), as the emitters'
+    x coordinates are a van der Corput sequence: a 1D edge's error ~ 1 / N."""
+    rows = []
+    for samples in (16, 64, 256, 1024):
+        red, x, z = floor_render(tmp_path, samples, occluded=True)
+        exact = exact_floor_colour(x, z, occluded=True)
+        full = exact_floor_colour(x, z, occluded=False)
+        penumbra = (exact > 0.05 * full) & (exact < 0.95 * full)
+        assert penumbra.sum() > 100
+        rows.append((samples, float(np.sqrt(np.mean(((red - exact) / full)[penumbra] ** 2)))))
+    n, err = np.array(rows).T
+    slope = np.polyfit(np.log(n), np.log(err), 1)[0]
+    assert err[-1] < 5e-3 and slope < -0.75, rows

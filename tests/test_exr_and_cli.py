@@ -120,7 +120,7 @@ def test_bench_rejects_unknown_scene_and_packet():
 def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
     import json
     plot = tmp_path / "err.png"
-    res = CliRunner().invoke(main, ["bench", "--scene", "torus", "--error", "--plot", str(plot)])
+    res = CliRunner().invoke(main, ["bench", "--scene", "torus", "--error", "--res", "64", "--plot", str(plot)])
     assert res.exit_code == 0, res.output
     report = json.loads(plot.with_suffix(".json").read_text())
     assert plot.stat().st_size > 10000

@@ -13,7 +13,7 @@ import numpy as np
 from anim import builtin
 from anim.scene import AnimatedScene
 
-from .image_error import run_image_study
+from .image_error import RES, run_image_study
 from .interp_error import bounce_overshoot, measure
 from .precision import precision_study
 
@@ -44,8 +44,10 @@ def eval_times(n, period):
     return period * ((0.5 + np.arange(n) * 0.6180339887498949) % 1.0)
 
 
-def run_error_report(names):
-    """{'scenes': {name: measure(...)}, 'bounce': rows} for scenes with exact motion."""
+def run_error_report(names, image_res=None):
+    """{'scenes': {name: measure(...)}, 'bounce': rows, 'image': ..., 'precision':
+    ...} for scenes with exact motion; the image study at image_res pixels
+    square (default image_error.RES)."""
     scenes = {}
     for name in names:
         if name not in builtin.SCENES:
@@ -62,7 +64,7 @@ def run_error_report(names):
         result["shipped"] = shipped_error(gen)
         scenes[name] = result
     return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
-            "bounce": bounce_overshoot(), "image": run_image_study(names),
+            "bounce": bounce_overshoot(), "image": run_image_study(names, image_res or RES),
             "precision": run_precision_study(names)}
 
 

@@ -30,7 +30,10 @@ REF_SPP = 256
 LIGHT_SAMPLES = (1, 2, 4, 8, 16, 32, 64)
 REF_LIGHT_SAMPLES = 512
 MAX_ERRORS = (0.04, 0.02, 0.01, 0.005, 0.0025)
-AREA_SAMPLES = 16          # the area light's samples in the area-lit scene's spp and budget studies
+# the area light's samples in the area-lit scene's spp and budget studies, and
+# the probes among them (render.light_probes): as a user would set them
+AREA_SAMPLES = 16
+AREA_PROBES = 4
 RES = 192
 EXPECTED_SLOPES = {"random": -0.5, "stratified at edges": -0.75}
 
@@ -134,7 +137,8 @@ def run_image_study(names, res=RES):
     """{'spp': {scene: rows}, 'budget': {scene: rows}, 'light_samples':
     {scene: rows}, 'slopes': {...}} for the built-in scenes named; on the
     first of them that has a point light, that light made an area light:
-    light samples 1..64, then spp and the error budget with AREA_SAMPLES."""
+    light samples 1..64, then spp and the error budget with AREA_SAMPLES
+    emitters, AREA_PROBES of them probes."""
     out = {"resolution": res, "ref_spp": REF_SPP, "ref_light_samples": REF_LIGHT_SAMPLES,
            "expected_slopes": EXPECTED_SLOPES, "spp": {}, "budget": {}, "light_samples": {}, "slopes": {}}
 
@@ -159,5 +163,6 @@ def run_image_study(names, res=RES):
                     out["slopes"][f"{label} light samples"] = slope(rows)
                     scene.spec.lights[index] = scene.spec.lights[index].model_copy(
                         update={"samples": AREA_SAMPLES})
+                    scene.spec.render = scene.spec.render.model_copy(update={"light_probes": AREA_PROBES})
                     pixel_studies(label, scene, t)
     return out
