@@ -62,7 +62,7 @@ class Group(click.Group):
     I/O fault writing a frame into one line and exit 1."""
 
     def invoke(self, ctx):
-        from anim.render.job import FrameWriteError
+        from anim.render.job import FrameRenderError, FrameWriteError
         main_thread = threading.current_thread() is threading.main_thread()
         before = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
         try:
@@ -86,7 +86,7 @@ class Group(click.Group):
                          "none is half-written (--resume renders the rest)")
             click.echo(f"frustrace: {what}", err=True)
             sys.exit(143 if isinstance(exc, Terminated) else 130)
-        except FrameWriteError as exc:
+        except (FrameWriteError, FrameRenderError) as exc:
             click.echo(f"frustrace: error: {exc}; the frames before it are complete", err=True)
             sys.exit(1)
         except BrokenPipeError:
@@ -184,11 +184,26 @@ def parse_frames(text, scene):
 @click.option("--preview", "preview_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Also write the frames as one animated .gif or .webp (tone-mapped, at most 640 px) "
                    "to look at.")
+@click.option("--workers", type=click.IntRange(1, 1024), metavar="N",
+              help="Render on an embedded Dask LocalCluster of N worker processes on this machine "
+                   "(listening on 127.0.0.1 only); each uses cores / N threads unless --threads says.")
+@click.option("--scheduler", metavar="ADDRESS",
+              help="Render on an existing Dask cluster: tcp://HOST:PORT, tls://HOST:PORT or a scheduler "
+                   "JSON file. The scene and its files are sent to the workers; they need only frustrace.")
+@click.option("--chunk", type=click.IntRange(1, 100000), default=4, show_default=True,
+              help="With --workers or --scheduler: consecutive frames per task (a worker keeps the "
+                   "static grid from frame to frame within a chunk and beyond).")
+@click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
+@click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
+@click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
 def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, max_error,
-           stats_path, resume, overwrite, quiet, res, preview_path):
+           stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
+           tls_ca, tls_cert, tls_key):
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
+    if workers and scheduler:
+        raise click.UsageError("--workers and --scheduler exclude each other")
     from anim.render.frame_files import frame_path
     from anim.render.job import RenderJob, render_animation
     from anim.render.settings import config_of
@@ -201,6 +216,10 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too
     n_threads = set_threads(threads)
+    if workers and not threads:            # the cores shared among the local workers
+        n_threads = max(1, (os.cpu_count() or 1) // workers)
+    elif scheduler and not threads:
+        n_threads = 0                      # each worker: all of its machine's cores
     width, height = res if res else (None, None)
     if packet and (accel or spec.render.accel) == "kdtree":
         from raycore.frame import KD_PACKET
@@ -211,22 +230,31 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"
-    job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite)
+    job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite, chunk)
     show = not quiet and sys.stderr.isatty()
     if preview_path:
         from anim.render.paths import writable_file
 
         from .preview import FORMATS
         writable_file(preview_path, "the --preview animation", FORMATS)
+    client = cluster = None
+    if workers or scheduler:
+        from anim.render.cluster import bundle_scene, connect, security_of
+        bundle_scene(scene)                # a file that cannot travel is an error before any cluster starts
+        client, cluster = connect(scheduler, workers, security=security_of(tls_ca, tls_cert, tls_key))
     stop = StopRequest()
     before = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with progress(len(frames), show) as on_frame:
             stats = render_animation(job, on_frame, warn=lambda m: click.echo(f"frustrace: warning: {m}", err=True),
-                                     should_stop=stop.pending)
+                                     should_stop=stop.pending, client=client)
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)
+        if client is not None:             # cancels what is left; the local cluster's workers end
+            client.close()
+            if cluster is not None:
+                cluster.close()
     if preview_path:
         from anim.render.frame_files import frame_file
 

@@ -1,4 +1,5 @@
-"""A render job: the frames of one scene written as EXR files, with stats.
+"""A render job: the frames of one scene written as EXR files, with stats,
+rendered in this process or on a Dask cluster (cluster.py).
 
 Writing a frame goes through a writer thread, but the render of the next frame
 waits for it (MAX_PENDING_WRITES = 0): on this 2-core machine kind the EXR
@@ -6,7 +7,7 @@ write holds a core, and numba's statically split parallel regions then stall
 on it, slowing the render phases by up to a third, which costs more than the
 overlap gains. Raise the constant on machines with cores to spare.
 """
-import json
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -14,8 +15,9 @@ from typing import NamedTuple
 
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.image_io import write_exr
+from raycore.image_io import temp_path, write_exr
 
+from .cluster import frame_metadata
 from .frame_files import frame_file, plan_frames
 from .output_dir import claim, release, remove_stale_temps
 from .paths import writable_dir, writable_file
@@ -37,23 +39,28 @@ class RenderJob(NamedTuple):
     stats_path: Path
     resume: bool
     overwrite: bool
+    chunk: int = 4            # cluster: consecutive frames per task
 
 
 class FrameWriteError(OSError):
     """A frame could not be written (disk full, directory gone, I/O error)."""
 
 
-def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None) -> dict:
-    """Render the job's frames; returns the stats (also written to
-    job.stats_path, merged by frame number with an earlier run's when
-    resuming). Whatever ends the run (the last frame, Ctrl-C, SIGTERM, a
-    failed write), the frames written so far are in stats.json, no frame is
-    left half-written, and no claim or temporary file of this run remains.
-    should_stop() is asked before every frame: an exception it returns ends
-    the run there (Ctrl-C and SIGTERM, noted by the command line)."""
+class FrameRenderError(RuntimeError):
+    """A frame could not be rendered (on a cluster worker: the error it raised)."""
+
+
+def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None, client=None) -> dict:
+    """Render the job's frames, here or, with a Dask `client`, on its
+    cluster; returns the stats (also written to job.stats_path, merged by
+    frame number with an earlier run's when resuming). Whatever ends the run
+    (the last frame, Ctrl-C, SIGTERM, a failed write or task), the frames
+    written so far are in stats.json, no frame is left half-written, and no
+    claim or temporary file of this run remains. should_stop() is asked
+    before every frame: an exception it returns ends the run there (Ctrl-C
+    and SIGTERM, noted by the command line)."""
     scene, cfg = job.scene, job.cfg
     warn = warn or (lambda message: None)
-    shading = shading_of(scene)
     todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn)
     stale = {path for _, path in todo if path.exists()}     # to be rendered again (not whole)
     for directory in sorted({path.parent for _, path in todo}):
@@ -61,60 +68,30 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
         for name in remove_stale_temps(directory):
             warn(f"removed {directory / name}, left by a render that was killed")
     writable_file(job.stats_path, "stats.json")
-    check_memory(scene, cfg)
-    first_t = scene.time_of(todo[0][0] if todo else scene.frame_numbers[0])
-    compile_s = warm_up(scene, shading, cfg, first_t) if todo else 0.0
-    renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES) if todo else None
     rows, claimed = [], set()          # claimed: frames this run holds a claim on
 
-    def write(path, result, row):
-        t0 = time.perf_counter()
-        channels = {"RGBA": result.rgba, "Z": result.z, **result.aovs}
-        meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
-                "Software": f"frustrace {VERSION}"}
-        for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
-            meta[f"frustrace:{k}"] = float(row[k])
-        # the whole row: a frame written by a run that was then killed still
-        # gets its line in stats.json (recovered_row) when a later run ends
-        meta["frustrace:stats"] = json.dumps(row)
-        try:
-            write_exr(str(path), channels, meta, scene.spec.output.compression)
-        except OSError as exc:
-            raise FrameWriteError(f"cannot write frame {row['frame']} to {path}: "
-                                  f"{exc.strerror or exc}") from None
-        row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
-        rows.append(row)                                      # in stats only once on disk
+    def take(frame, path) -> bool:
+        """Claim a frame before it is rendered; False if it is not ours to do."""
+        if not claim(path):          # another render (--resume, same directory) has it
+            return False
+        if job.resume and path.exists() and path not in stale:
+            release(path)            # finished by another render since we planned
+            return False
+        claimed.add(path)
+        return True
+
+    def done(path, row):
+        rows.append(row)             # in stats only once on disk
         release(path)
-        claimed.discard(path)      # released: a later claim on it is another render's
+        claimed.discard(path)        # released: a later claim on it is another render's
 
     wall0 = time.perf_counter()
-    ended = "complete"
+    ended, extra = "complete", {"compile_s": 0.0}
     try:
-        with ThreadPoolExecutor(max_workers=1) as writer:
-            pending = []
-            for frame, path in todo:
-                while len(pending) > MAX_PENDING_WRITES:
-                    pending.pop(0).result()
-                stop = should_stop() if should_stop else None
-                if stop is not None:
-                    raise stop
-                if not claim(path):          # another render (--resume, same directory) has it
-                    continue
-                if job.resume and path.exists() and path not in stale:
-                    release(path)            # finished by another render since we planned
-                    continue
-                claimed.add(path)
-                t = scene.time_of(frame)
-                # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
-                # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
-                # writer thread never sees its images overwritten
-                interp_ms, result = renderer.render(t)
-                row = frame_row(scene, frame, t, interp_ms, result)
-                pending.append(writer.submit(write, path, result, row))
-                if on_frame:
-                    on_frame(row)
-            for p in pending:
-                p.result()
+        if client is None:
+            extra["compile_s"] = _render_here(job, todo, take, done, on_frame, should_stop)
+        else:
+            extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client))
     except BaseException as exc:
         ended = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"failed: {exc}"
         raise
@@ -123,8 +100,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
             release(path)
         wall_s = time.perf_counter() - wall0
         run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(time.time() - wall_s)),
-               "frames_rendered": len(rows), "wall_s": wall_s, "compile_s": compile_s, "ended": ended,
-               **settings_of(cfg)}
+               "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
                                 lambda f: frame_file(scene, job.out_dir, f), job.frames)
@@ -134,3 +110,115 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None)
                 raise FrameWriteError(message) from None
             warn(message)                # the fault that ended the run is the one to report
     return stats
+
+
+def _render_here(job, todo, take, done, on_frame, should_stop) -> float:
+    """Frames in this process, written by a writer thread; returns the
+    compile (warm-up) seconds."""
+    scene, cfg = job.scene, job.cfg
+    shading = shading_of(scene)
+    check_memory(scene, cfg)
+    if not todo:
+        return 0.0
+    compile_s = warm_up(scene, shading, cfg, scene.time_of(todo[0][0]))
+    renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
+
+    def write(path, result, row):
+        t0 = time.perf_counter()
+        channels = {"RGBA": result.rgba, "Z": result.z, **result.aovs}
+        try:
+            write_exr(str(path), channels, frame_metadata(row, VERSION), scene.spec.output.compression)
+        except OSError as exc:
+            raise FrameWriteError(f"cannot write frame {row['frame']} to {path}: "
+                                  f"{exc.strerror or exc}") from None
+        row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
+        done(path, row)
+
+    with ThreadPoolExecutor(max_workers=1) as writer:
+        pending = []
+        for frame, path in todo:
+            while len(pending) > MAX_PENDING_WRITES:
+                pending.pop(0).result()
+            stop = should_stop() if should_stop else None
+            if stop is not None:
+                raise stop
+            if not take(frame, path):
+                continue
+            t = scene.time_of(frame)
+            # a frame's images come from a ring of MAX_PENDING_WRITES + 2 sets, and
+            # at most MAX_PENDING_WRITES writes are unfinished while it renders, so the
+            # writer thread never sees its images overwritten
+            interp_ms, result = renderer.render(t)
+            row = frame_row(scene, frame, t, interp_ms, result)
+            pending.append(writer.submit(write, path, result, row))
+            if on_frame:
+                on_frame(row)
+        for p in pending:
+            p.result()
+    return compile_s
+
+
+def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> dict:
+    """Frames on the client's cluster in chunks of consecutive frames; each
+    frame comes back as EXR bytes and is written here, atomically. Returns
+    the run's per-worker figures. A Ctrl-C (should_stop) or a failed task
+    cancels every chunk still out."""
+    import dataclasses
+
+    from distributed import as_completed
+
+    from .cluster import TASK_RETRIES, bundle_scene, chunks_of, render_chunk
+    scene, cfg = job.scene, job.cfg
+    mine = [(f, p) for f, p in todo if take(f, p)]
+    paths = dict(mine)
+    if not mine:
+        return {"workers": {}}
+    bundle = client.scatter(bundle_scene(scene), broadcast=True, hash=False)
+    cfg_fields = dataclasses.asdict(cfg)
+    futures = [client.submit(render_chunk, bundle, cfg_fields, c, scene.spec.output.compression, VERSION,
+                             retries=TASK_RETRIES, pure=False)
+               for c in chunks_of([f for f, _ in mine], max(1, job.chunk))]
+    workers = {}
+    try:
+        for future in as_completed(futures):
+            stop = should_stop() if should_stop else None
+            if stop is not None:
+                raise stop
+            try:
+                results = future.result()
+            except Exception as exc:     # the task's error, raised again here by Dask
+                raise FrameRenderError(str(exc)) from None
+            for frame, data, row in results:
+                path = paths[frame]
+                t0 = time.perf_counter()
+                _write_bytes(path, data, frame)
+                row["write_ms"] = (time.perf_counter() - t0) * 1e3
+                row["bytes"] = len(data)
+                w = workers.setdefault(row["worker"], {"compile_s": row.pop("worker_compile_s"),
+                                                      "frames": 0, "busy_ms": 0.0})
+                row.pop("worker_compile_s", None)
+                w["frames"] += 1
+                w["busy_ms"] += sum(row[k] for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
+                                                     "shadow_ms", "encode_ms"))
+                done(path, row)
+                if on_frame:
+                    on_frame(row)
+    finally:
+        client.cancel([f for f in futures if not f.done()])
+    for w in workers.values():
+        w["fps"] = w["frames"] / (w.pop("busy_ms") / 1e3) if w["frames"] else 0.0
+    return {"workers": workers}
+
+
+def _write_bytes(path: Path, data: bytes, frame: int) -> None:
+    """An encoded frame into place: temporary file, then rename."""
+    tmp = temp_path(str(path))
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise FrameWriteError(f"cannot write frame {frame} to {path}: {exc.strerror or exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)

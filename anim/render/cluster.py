@@ -1,0 +1,223 @@
+"""Frames on a Dask cluster: an embedded LocalCluster (`render --workers N`)
+or an existing one (`render --scheduler ADDRESS`).
+
+The scene travels, not the file system: the client packs the scene file and
+every file it references into one bundle (bytes by relative path), sends it
+to every worker once, and each worker unpacks it into a directory of its
+own, builds the scene, compiles (or loads) the kernels and keeps all of it
+for the tasks that follow. A task is a chunk of consecutive frames (the
+grid of the static objects is kept from frame to frame); the worker returns
+each frame as encoded EXR bytes, so compression runs on the workers, and the
+client writes them atomically, as the single-process path does. Dask
+retries a chunk whose worker died elsewhere; its frames reach the client
+only when the whole chunk is done, so none is written twice.
+"""
+import hashlib
+import os
+import socket
+import tempfile
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+from anim.errors import SceneError
+
+# the worker's scenes: bundle digest -> WorkerScene (kept between tasks)
+_WORKER_SCENES = {}
+CONNECT_TIMEOUT_S = 10
+TASK_RETRIES = 3
+
+
+class Bundle(NamedTuple):
+    """A scene and its files: name of the scene file, {relative path: bytes}."""
+    scene_name: str
+    files: dict
+    digest: str
+
+
+def referenced_files(scene) -> list:
+    """(key, relative path) of every file the scene reads, the scene file
+    first; glTF meshes bring their external buffers and images. A reference
+    outside the scene's directory cannot travel: SceneError naming its key."""
+    if scene.outside_paths:
+        key, ref = scene.outside_paths[0]
+        raise SceneError(scene.path, key, f"{ref!r} lies outside the scene's directory, so it cannot be "
+                                          "sent to the workers (keep every file under the scene's directory)")
+    spec, base = scene.spec, scene.path.parent
+    refs = [("", scene.path.name)]
+    refs += [(f"materials.{n}.texture", m.texture) for n, m in spec.materials.items() if m.texture]
+    for i, o in enumerate(spec.objects):
+        if o.mesh:
+            refs.append((f"objects.{i}.mesh", o.mesh))
+            if o.mesh.lower().endswith(".gltf"):
+                refs += [(f"objects.{i}.mesh", uri) for uri in _gltf_uris(base / o.mesh, o.mesh)]
+        for j, k in enumerate(o.keyframes or []):
+            refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
+        if o.skeleton:
+            refs.append((f"objects.{i}.skeleton.weights", o.skeleton.weights))
+    seen, out = set(), []
+    for key, ref in refs:
+        if ref not in seen:
+            seen.add(ref)
+            out.append((key, ref))
+    return out
+
+
+def _gltf_uris(path: Path, ref: str) -> list:
+    """The external files (buffers, images) of a .gltf, relative to the scene."""
+    import json
+    from urllib.parse import unquote
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return []
+    uris = [item.get("uri") for kind in ("buffers", "images") for item in doc.get(kind, [])]
+    folder = os.path.dirname(ref)
+    return [os.path.join(folder, unquote(u)) for u in uris if u and not u.startswith("data:")]
+
+
+def bundle_scene(scene) -> Bundle:
+    """The scene file and every file it references, read once on the client."""
+    files = {}
+    for key, ref in referenced_files(scene):
+        try:
+            files[ref] = (scene.path.parent / ref).read_bytes()
+        except OSError as exc:
+            raise SceneError(scene.path, key, f"cannot read {ref}: {exc.strerror or exc}") from None
+    h = hashlib.sha256()
+    for ref in sorted(files):
+        h.update(ref.encode())
+        h.update(hashlib.sha256(files[ref]).digest())
+    return Bundle(scene.path.name, files, h.hexdigest()[:16])
+
+
+class WorkerScene(NamedTuple):
+    scene: object
+    renderer: object
+    compile_s: float
+    directory: object         # the TemporaryDirectory holding the unpacked files
+
+
+def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
+    """This worker's copy of the scene, unpacked, loaded and warmed up once."""
+    from anim.scene import AnimatedScene
+    from raycore.config import RenderConfig
+
+    from .renderer import SceneRenderer, warm_up
+    from .settings import shading_of
+    key = (bundle.digest, tuple(sorted(cfg_fields.items())))
+    if key in _WORKER_SCENES:
+        return _WORKER_SCENES[key]
+    directory = tempfile.TemporaryDirectory(prefix="frustrace-scene-")
+    root = Path(directory.name)
+    for ref, data in bundle.files.items():
+        target = root / ref
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    scene = AnimatedScene(root / bundle.scene_name)
+    cfg = RenderConfig(**cfg_fields)
+    shading = shading_of(scene)
+    compile_s = warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]))
+    _WORKER_SCENES[key] = WorkerScene(scene, SceneRenderer(scene, cfg, shading), compile_s, directory)
+    return _WORKER_SCENES[key]
+
+
+def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: str, version: str) -> list:
+    """Run on a worker: [(frame, exr bytes, stats row)] of consecutive frames.
+    An error names its frame."""
+    from raycore._jit import set_threads
+    from raycore.image_io import write_exr
+
+    from .stats import frame_row
+    set_threads(cfg_fields["threads"])
+    ws = _worker_scene(bundle, cfg_fields)
+    worker = _worker_name()
+    out = []
+    for frame in frames:
+        try:
+            t = ws.scene.time_of(frame)
+            interp_ms, result = ws.renderer.render(t)
+            row = {**frame_row(ws.scene, frame, t, interp_ms, result), "worker": worker,
+                   "worker_compile_s": ws.compile_s}
+            t0 = time.perf_counter()
+            path = os.path.join(ws.directory.name, f"frame.{os.getpid()}.exr")
+            write_exr(path, {"RGBA": result.rgba, "Z": result.z, **result.aovs},
+                      frame_metadata(row, version), compression)
+            with open(path, "rb") as f:
+                data = f.read()
+            os.remove(path)
+            row["encode_ms"] = (time.perf_counter() - t0) * 1e3
+        except Exception as exc:
+            raise RuntimeError(f"frame {frame} on {worker}: {type(exc).__name__}: {exc}") from exc
+        out.append((frame, data, row))
+    return out
+
+
+def frame_metadata(row: dict, version: str) -> dict:
+    """The EXR header attributes of a frame (both paths write the same)."""
+    import json
+    meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
+            "Software": f"frustrace {version}"}
+    for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
+        meta[f"frustrace:{k}"] = float(row[k])
+    # the whole row: a frame written by a run that was then killed still gets
+    # its line in stats.json (stats.recovered_row) when a later run ends
+    meta["frustrace:stats"] = json.dumps(row)
+    return meta
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+        return get_worker().name if isinstance(get_worker().name, str) else get_worker().address
+    except (ImportError, ValueError):
+        return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def chunks_of(frames: list, chunk: int) -> list:
+    """Runs of at most `chunk` frames, in order."""
+    return [frames[i:i + chunk] for i in range(0, len(frames), chunk)]
+
+
+def security_of(tls_ca=None, tls_cert=None, tls_key=None):
+    """Dask Security for tls:// addresses from certificate files (None: Dask's
+    own configuration)."""
+    if not (tls_ca or tls_cert or tls_key):
+        return None
+    from distributed.security import Security
+    for what, path in (("--tls-ca", tls_ca), ("--tls-cert", tls_cert), ("--tls-key", tls_key)):
+        if not path or not Path(path).is_file():
+            raise SceneError(what, "", f"needs a readable file (got {path!r}); give all three of "
+                                       "--tls-ca, --tls-cert and --tls-key")
+    return Security(tls_ca_file=str(tls_ca), tls_client_cert=str(tls_cert), tls_client_key=str(tls_key),
+                    require_encryption=True)
+
+
+def connect(scheduler=None, workers=None, threads_per_worker=1, security=None):
+    """(client, cluster or None): an embedded LocalCluster of `workers`
+    processes listening on 127.0.0.1 only, or a connection to `scheduler`
+    (SceneError, exit 2, naming the address if it cannot be reached within
+    CONNECT_TIMEOUT_S)."""
+    import logging
+
+    from distributed import Client, LocalCluster
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+        return Client(cluster), cluster
+    kwargs = {"timeout": CONNECT_TIMEOUT_S}
+    if security is not None:
+        kwargs["security"] = security
+    try:
+        if scheduler.endswith(".json") and Path(scheduler).is_file():
+            return Client(scheduler_file=scheduler, **kwargs), None
+        return Client(scheduler, **kwargs), None
+    except TypeError as exc:         # tls:// without certificates: Dask has no SSL context
+        if "ssl" not in str(exc).lower():
+            raise
+        raise SceneError("--scheduler", "", f"{scheduler} needs TLS certificates: give --tls-ca, "
+                                            "--tls-cert and --tls-key (or set them in Dask's configuration)") from None
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SceneError("--scheduler", "", f"cannot reach the Dask scheduler at {scheduler}: "
+                                            f"{type(exc).__name__}: {exc}".splitlines()[0]) from None
