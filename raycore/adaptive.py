@@ -136,15 +136,16 @@ def half_difference(first, sums, n_first, n_second):
     return (np.abs(a - b) / 2).max(axis=1)
 
 
-def refine(rgba, z, width, height, background, max_error, cap, trace_pass):
+def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     """Spend samples where the 1-spp image `rgba` (H*W, 4), `z` (H*W,) is
     above `max_error`, up to `cap` samples per pixel, and write the means
     back into rgba and the nearest depth into z; a miss counts as
     `background` with A = 0.
 
-    trace_pass(pixels, offset) traces, for the pixel indices `pixels` (in
-    block order) at sub-pixel `offset`, one camera ray each, shades the
-    samples and returns (surface_pixel, rgb (3, k), depth (k,)) of those that hit.
+    trace_passes(pixels, offsets) traces, for the pixel indices `pixels` (in
+    block order), one camera ray each at every sub-pixel offset of
+    `offsets`, shades the samples and returns per offset (surface_pixel,
+    rgb (3, k), depth (k,)) of those that hit.
 
     Returns (samples per pixel (H*W,) int32, error estimate (H*W,) f32):
     the estimate a pixel stopped at (1 spp: the neighbour contrast)."""
@@ -177,11 +178,20 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_pass):
         # samples before this round (when the cap cuts a round short, those too)
         half_at = max((total - 1) // 2, done)
         half = sums[live] if done == half_at else None
-        for i in range(done, total):
-            hit_pixel, rgb, depth = trace_pass(pixels, sample_offset(i))
-            add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, sumsq, zmin, value)
-            if i + 1 == half_at:
+        # the round's passes in groups of about one image's worth of samples:
+        # traced and shaded together, their shadow rays are one denser set
+        group = max(1, n_pix // pixels.size)
+        i = done
+        while i < total:
+            end = min(i + group, total)
+            if i < half_at < end:
+                end = half_at                              # a group ends at the half
+            ids = range(i, end)
+            for hit_pixel, rgb, depth in trace_passes(pixels, [sample_offset(k) for k in ids]):
+                add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, sumsq, zmin, value)
+            if end == half_at:
                 half = sums[live]                          # a copy
+            i = end
         done = total
         samples[pixels] = done
         err = np.maximum(half_difference(half, sums[live], half_at, done - half_at),

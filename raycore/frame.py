@@ -18,7 +18,7 @@ from .kdtree_build import build_kdtree
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
 from .shadow_rays import LightRays
-from .surface import visible_surface
+from .surface import Surface, visible_surface
 from .trace import camera_buffers, row_major_offsets
 from .workspace import Workspace
 
@@ -199,8 +199,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["tri_tests"] += c.tests
         counters["fallback_rays"] += c.fallback_rays
 
-    def shade_surface(surface):
-        """Shadow rays and shading of one pass's visible samples: rgb (3, n)."""
+    def shade_surface(surface, aov=True):
+        """Shadow rays and shading of visible samples: rgb (3, n); with aov,
+        the samples (one pass's) also offered to the AOVs."""
         t0 = time.perf_counter()
         n_vis = surface.pixel.shape[0]
         vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
@@ -235,7 +236,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         rgb = buffers.work.take("rgb", (3, n_vis), capacity=3 * W * H)
         shade_samples(surface.point, surface.smooth_n, surface.view, surface.albedo, surface.ks,
                       surface.shininess, shading.lights, vis, cast_shadows, np.float32(cfg.ambient), rgb)
-        if aovs is not None:
+        if aovs is not None and aov:
             aovs.add(surface)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
         return rgb
@@ -269,7 +270,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     samples = None
     if cfg.max_error > 0 and single:
         samples = refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays,
-                                timings)
+                                timings, aovs)
         counters["adaptive_spp_mean"] = float(samples.mean())
         counters["rays_left_out"] = adaptive_cap(cfg) * W * H - counters["rays"]
     return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs.channels(H, W) if aovs else {},
@@ -282,15 +283,18 @@ def adaptive_cap(cfg: RenderConfig) -> int:
     return cfg.spp if cfg.spp > 1 else ADAPTIVE_SPP_CAP
 
 
-def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays, timings):
-    """The error budget (adaptive.py) over the 1-spp image. A pass traces one
-    camera ray per active pixel (in adaptive.py's block order, so that a
-    packet holds neighbours) as a ray batch, and places the hits in an
-    image-sized layout (prim -1 elsewhere) for the surface gather; shadows
-    and shading then cover the active pixels alone. Tracing instead the 4x4
-    blocks that hold active pixels as camera packets cast 2.4x the camera
-    rays and took longer (hand, 256^2, E = 0.02: 171 against 117 ms of
-    tracing). Returns the samples per pixel."""
+def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays, timings, aovs):
+    """The error budget (adaptive.py) over the 1-spp image. A group of passes
+    (sample offsets) traces one camera ray per active pixel and offset as
+    one ray batch (pixels in adaptive.py's block order, a pixel's rays side
+    by side, so that a packet holds neighbours), places each offset's hits
+    in an image-sized layout (prim -1 elsewhere) for the surface gather,
+    then shadows and shades the group's samples as one set. Tracing instead
+    the 4x4 blocks that hold active pixels as camera packets cast 2.4x the
+    camera rays and took longer (hand, 256^2, E = 0.02: 171 against 117 ms
+    of tracing, pass by pass); shadowing pass by pass took 5x longer (369
+    against 76 ms): small scattered sets make loose light-space packets.
+    Returns the samples per pixel."""
     W, H = cfg.width, cfg.height
     n_pix = W * H
     full_t = buffers.work.take("adaptive.t", (n_pix,))
@@ -301,24 +305,40 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
     layout = row_major_offsets(W, H)
     eye = np.asarray(cam[:3], np.float32)
 
-    def trace_pass(pixels, offset):
+    def trace_passes(pixels, offsets):
+        # every offset's camera rays in one batch, pixel-major (a pixel's rays
+        # side by side), so that a packet spans as few pixels as it can
         t0 = time.perf_counter()
-        n = pixels.shape[0]
-        dirs = np.empty((n, 3), np.float32)
-        camera_rays_of(cam, pixels, W, np.float32(offset[0]), np.float32(offset[1]), dirs)
-        hits = accel.trace_rays(np.broadcast_to(eye, (n, 3)), dirs)
-        full_t[pixels] = hits.t
-        full_prim[pixels] = hits.prim
-        full_b1[pixels] = hits.b1
-        full_b2[pixels] = hits.b2
+        m, g = pixels.shape[0], len(offsets)
+        dirs = np.empty((g, m, 3), np.float32)
+        for j, (ox, oy) in enumerate(offsets):
+            camera_rays_of(cam, pixels, W, np.float32(ox), np.float32(oy), dirs[j])
+        hits = accel.trace_rays(np.broadcast_to(eye, (m * g, 3)),
+                                np.ascontiguousarray(dirs.transpose(1, 0, 2)).reshape(-1, 3))
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
-        count_camera_rays(n, hits.counters)
-        surface = gather(offset, full_t, full_prim, full_b1, full_b2, layout)
-        full_prim[pixels] = -1
-        return surface.pixel, shade_surface(surface), surface.depth
+        count_camera_rays(m * g, hits.counters)
+        surfaces = []
+        for j, offset in enumerate(offsets):
+            full_t[pixels] = hits.t[j::g]
+            full_prim[pixels] = hits.prim[j::g]
+            full_b1[pixels] = hits.b1[j::g]
+            full_b2[pixels] = hits.b2[j::g]
+            surface = gather(offset, full_t, full_prim, full_b1, full_b2, layout)
+            full_prim[pixels] = -1
+            if aovs is not None:
+                aovs.add(surface)
+            surfaces.append(Surface(*(np.array(f) for f in surface)))     # out of the workspace
+        # the passes' samples shadowed and shaded as one set
+        rgb = shade_surface(Surface(*(np.concatenate(f, axis=-1) for f in zip(*surfaces))), aov=False)
+        out, k = [], 0
+        for s in surfaces:
+            n_hit = s.pixel.shape[0]
+            out.append((s.pixel, rgb[:, k:k + n_hit], s.depth))
+            k += n_hit
+        return out
 
     samples, _ = refine(rgba, z, W, H, np.asarray(cfg.background, np.float32), cfg.max_error,
-                        adaptive_cap(cfg), trace_pass)
+                        adaptive_cap(cfg), trace_passes)
     return samples
 
 

@@ -22,15 +22,18 @@ def inside(x, y):
 
 
 def disc_pass(calls):
-    """trace_pass of the analytic image: a grey disc on black, one sample per
-    pixel at the given sub-pixel offset."""
-    def trace_pass(pixels, offset):
-        calls.append(pixels.size)
-        x, y = pixels % W + offset[0], pixels // W + offset[1]
-        hit = pixels[inside(x, y)]
-        rgb = np.repeat(GREY[:, None], hit.size, axis=1)
-        return hit.astype(np.int32), rgb, np.ones(hit.size, np.float32)
-    return trace_pass
+    """trace_passes of the analytic image: a grey disc on black, one sample
+    per pixel at each of the given sub-pixel offsets."""
+    def trace_passes(pixels, offsets):
+        out = []
+        for offset in offsets:
+            calls.append(pixels.size)
+            x, y = pixels % W + offset[0], pixels // W + offset[1]
+            hit = pixels[inside(x, y)]
+            rgb = np.repeat(GREY[:, None], hit.size, axis=1)
+            out.append((hit.astype(np.int32), rgb, np.ones(hit.size, np.float32)))
+        return out
+    return trace_passes
 
 
 def centre_image():
