@@ -234,3 +234,36 @@ def test_ctrl_c_cancels_and_leaves_no_worker_process(tmp_path):
     stats = json.loads((out / "stats.json").read_text())
     assert 2 <= len(stats["frames"]) < 120
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_a_task_that_raises_names_its_frame_and_keeps_the_frames_before(tmp_path):
+    """A worker's error (here: frames past the first chunk given a packet
+    size the grid does not have) ends the render with the frame and the
+    error named; the chunks finished before it are on disk."""
+    from distributed import Client
+
+    from anim.render import cluster
+    from anim.render.job import FrameRenderError, RenderJob, render_animation
+    from anim.render.settings import config_of
+    from anim.scene import AnimatedScene
+
+    scene = AnimatedScene(DEMO)
+    cfg = config_of(scene, width=48, height=36, threads=1)
+    real = cluster.render_chunk
+
+    def failing_chunk(bundle, cfg_fields, frames, *args):
+        if frames[0] >= 4:
+            cfg_fields = {**cfg_fields, "packet": 3}
+        return real(bundle, cfg_fields, frames, *args)
+    cluster.render_chunk = failing_chunk
+    try:
+        with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as client:
+            job = RenderJob(scene, cfg, list(range(8)), tmp_path, tmp_path / "stats.json", False, False, chunk=4)
+            with pytest.raises(FrameRenderError, match=r"frame 4 on .*packet must be one of"):
+                render_animation(job, client=client)
+    finally:
+        cluster.render_chunk = real
+    assert frames_in(tmp_path) == [f"frame_{i:04d}.exr" for i in range(4)]
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert [r["frame"] for r in stats["frames"]] == [0, 1, 2, 3]
+    assert stats["runs"][-1]["ended"].startswith("failed: frame 4")

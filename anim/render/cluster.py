@@ -130,8 +130,12 @@ def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: st
 
     from .stats import frame_row
     set_threads(cfg_fields["threads"])
-    ws = _worker_scene(bundle, cfg_fields)
     worker = _worker_name()
+    try:
+        ws = _worker_scene(bundle, cfg_fields)
+    except Exception as exc:
+        raise RuntimeError(f"frame {frames[0]} on {worker}, preparing the scene: "
+                           f"{type(exc).__name__}: {exc}") from exc
     out = []
     for frame in frames:
         try:
