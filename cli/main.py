@@ -192,7 +192,7 @@ def parse_frames(text, scene):
                    "JSON file. The scene and its files are sent to the workers; they need only frustrace.")
 @click.option("--chunk", type=click.IntRange(1, 100000), default=4, show_default=True,
               help="With --workers or --scheduler: consecutive frames per task (a worker keeps the "
-                   "static grid from frame to frame within a chunk and beyond).")
+                   "static grid from frame to frame; 4 measured fastest of 1, 4 and 12 on hand at 1024^2).")
 @click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
