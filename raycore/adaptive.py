@@ -98,7 +98,7 @@ def camera_rays_of(cam, pixels, width, jx, jy, dirs):
 
 
 @kernel
-def add_pass(pixels, slot, surf_pixel, rgb, depth, bg, sums, sumsq, zmin, value):
+def add_pass(pixels, slot, surf_pixel, rgb, depth, bg, sums, zmin, value):
     """One sample of each of `pixels` into its running sums (row slot[p]):
     the background (A = 0) where its ray missed, the shaded colour (A = 1)
     where it hit (surf_pixel, rgb, depth: the pass's visible samples)."""
@@ -112,9 +112,7 @@ def add_pass(pixels, slot, surf_pixel, rgb, depth, bg, sums, sumsq, zmin, value)
     for i in range(pixels.shape[0]):
         r = slot[pixels[i]]
         for c in range(4):
-            v = np.float64(value[r, c])
-            sums[r, c] += v
-            sumsq[r, c] += v * v
+            sums[r, c] += np.float64(value[r, c])
 
 
 def block_order(pixels, width):
@@ -161,7 +159,6 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     m = active.size
     # running sums of the refined pixels, their centre sample included
     sums = rgba[active].astype(np.float64)
-    sumsq = sums * sums                     # kept for the sums' kernel; the estimate uses halves
     zmin = z[active].copy()
     slot = np.full(n_pix, -1, np.int64)
     slot[active] = np.arange(m)
@@ -188,7 +185,7 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
                 end = half_at                              # a group ends at the half
             ids = range(i, end)
             for hit_pixel, rgb, depth in trace_passes(pixels, [sample_offset(k) for k in ids]):
-                add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, sumsq, zmin, value)
+                add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, zmin, value)
             if end == half_at:
                 half = sums[live]                          # a copy
             i = end

@@ -104,16 +104,16 @@ class Cluster:
         protocol = ["--protocol", "tls"] if tls else []
         self.scheduler = self._start([BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
                                       "--no-dashboard", "--scheduler-file", self.file, *protocol,
-                                      *self._tls_args("scheduler")])
+                                      *self._tls_args()])
         deadline = time.monotonic() + 60
         while not self.file.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
         self.address = json.loads(self.file.read_text())["address"]
         self.workers = [self._start([BIN / "dask", "worker", self.address, "--nthreads", "1",
                                      "--host", "127.0.0.1", "--no-dashboard", "--name", f"w{i}",
-                                     *self._tls_args("worker")]) for i in range(n_workers)]
+                                     *self._tls_args()]) for i in range(n_workers)]
 
-    def _tls_args(self, role):
+    def _tls_args(self):
         if not self.tls:
             return []
         ca, cert, key = self.tls

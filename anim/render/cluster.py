@@ -171,11 +171,13 @@ def frame_metadata(row: dict, version: str) -> dict:
 
 
 def _worker_name() -> str:
+    """The Dask worker's name (its address unless it was given one)."""
     try:
         from distributed import get_worker
-        return get_worker().name if isinstance(get_worker().name, str) else get_worker().address
-    except (ImportError, ValueError):
+        worker = get_worker()
+    except (ImportError, ValueError):          # not inside a Dask task
         return f"{socket.gethostname()}:{os.getpid()}"
+    return worker.name if isinstance(worker.name, str) else worker.address
 
 
 def chunks_of(frames: list, chunk: int) -> list:

@@ -194,9 +194,8 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> 
                 _write_bytes(path, data, frame)
                 row["write_ms"] = (time.perf_counter() - t0) * 1e3
                 row["bytes"] = len(data)
-                w = workers.setdefault(row["worker"], {"compile_s": row.pop("worker_compile_s"),
-                                                      "frames": 0, "busy_ms": 0.0})
-                row.pop("worker_compile_s", None)
+                compile_s = row.pop("worker_compile_s")
+                w = workers.setdefault(row["worker"], {"compile_s": compile_s, "frames": 0, "busy_ms": 0.0})
                 w["frames"] += 1
                 w["busy_ms"] += sum(row[k] for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
                                                      "shadow_ms", "encode_ms"))
