@@ -207,3 +207,22 @@ def test_texture_write_read_round_trip(tmp_path):
     lin = np.random.default_rng(3).random((5, 7, 3)).astype(np.float32)
     write_texture(str(tmp_path / "t.png"), lin)
     np.testing.assert_allclose(read_texture(tmp_path / "t.png"), lin, atol=0.01)
+
+
+def test_fps_wall_leaves_the_compile_time_out(small_demo, tmp_path, monkeypatch):
+    """A slow warm-up (a cold numba cache) is reported as compile_s, not
+    counted in the run's wall clock or fps_wall."""
+    import json
+    import time as time_module
+
+    import anim.render.job as job_module
+
+    def slow_warm_up(*args):
+        time_module.sleep(1.5)
+        return 1.5
+    monkeypatch.setattr(job_module, "warm_up", slow_warm_up)
+    res = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(tmp_path / "o"), "--frames", "0:1", "-q"])
+    assert res.exit_code == 0, res.output
+    stats = json.loads((tmp_path / "o" / "stats.json").read_text())
+    run = stats["runs"][-1]
+    assert run["compile_s"] == 1.5 and run["wall_s"] < 1.0

@@ -89,7 +89,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     ended, extra = "complete", {"compile_s": 0.0}
     try:
         if client is None:
-            extra["compile_s"] = _render_here(job, todo, take, done, on_frame, should_stop)
+            _render_here(job, todo, take, done, on_frame, should_stop, extra)
         else:
             extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client))
     except BaseException as exc:
@@ -98,7 +98,9 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     finally:
         for path in claimed:
             release(path)
-        wall_s = time.perf_counter() - wall0
+        # the wall clock of the frames: the warm-up (compile) is reported apart;
+        # on a cluster the workers' own warm-ups fall inside it
+        wall_s = time.perf_counter() - wall0 - extra["compile_s"]
         run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(time.time() - wall_s)),
                "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
@@ -112,15 +114,15 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     return stats
 
 
-def _render_here(job, todo, take, done, on_frame, should_stop) -> float:
-    """Frames in this process, written by a writer thread; returns the
-    compile (warm-up) seconds."""
+def _render_here(job, todo, take, done, on_frame, should_stop, extra) -> None:
+    """Frames in this process, written by a writer thread; the compile
+    (warm-up) seconds go into extra["compile_s"] as soon as they are known."""
     scene, cfg = job.scene, job.cfg
     shading = shading_of(scene)
     check_memory(scene, cfg)
     if not todo:
-        return 0.0
-    compile_s = warm_up(scene, shading, cfg, scene.time_of(todo[0][0]))
+        return
+    extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo[0][0]))
     renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
 
     def write(path, result, row):
@@ -155,7 +157,6 @@ def _render_here(job, todo, take, done, on_frame, should_stop) -> float:
                 on_frame(row)
         for p in pending:
             p.result()
-    return compile_s
 
 
 def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> dict:
