@@ -52,6 +52,9 @@ def warm_up(scene, shading, cfg, t) -> float:
 BYTES_PER_PIXEL = 16 + 96 + 52 + 12 + 40 + 28
 
 
+# an error budget's group of passes holds about one image's samples twice
+# (each pass's surface rows copied, then joined: 2 x 96) and their camera rays (28)
+BUDGET_BYTES_PER_PIXEL = 2 * 96 + 28
 # bytes per triangle: gathered vertices (36), faces and materials (16), normals
 # and their CSR (~24), grid cell lists (~4 cells x 4) and a kd-tree (~64)
 BYTES_PER_TRIANGLE = 36 + 16 + 24 + 16 + 64
@@ -74,7 +77,8 @@ def check_memory(scene, cfg, available=None):
     the memory available now, instead of an out-of-memory kill mid-run."""
     pixels = cfg.width * cfg.height
     per_pixel = (BYTES_PER_PIXEL + 4 * len(scene.spec.lights)
-                 + sum({"N": 24, "P": 24, "id": 8}[a] for a in cfg.aovs))    # AOV + its EXR copy
+                 + sum({"N": 24, "P": 24, "id": 8}[a] for a in cfg.aovs)     # AOV + its EXR copy
+                 + (BUDGET_BYTES_PER_PIXEL if cfg.max_error > 0 else 0))
     need = pixels * per_pixel + scene.faces.shape[0] * BYTES_PER_TRIANGLE
     available = available_bytes() if available is None else available
     if available is not None and need > 0.9 * available:
