@@ -6,9 +6,9 @@ without a budget). A pixel's error at 1 spp is estimated from its
 neighbours: half the largest difference (any of R, G, B, A) to one of its
 8 neighbours bounds how far the pixel's footprint can vary around its
 centre. Pixels above the budget E are refined in rounds (7, 15, 31, ...
-samples up to the cap), each round one pass per new sample offset over the
-active pixels only, all of them at the same offset (so a pass is one
-coherent set of camera rays, cut into packets of neighbouring pixels).
+samples up to the cap), each pass one new sample offset for the active
+pixels only; the caller traces and shades a group of passes together
+(trace_passes), their rays ordered so that a packet holds neighbours.
 After a round a pixel's error is estimated from the means of two halves
 of its samples (those before the round, those of it), |mean_a - mean_b| / 2,
 largest over R, G, B and A (Dammertz et al. 2010). The sample variance

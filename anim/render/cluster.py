@@ -128,7 +128,7 @@ def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: st
     from raycore._jit import set_threads
     from raycore.image_io import write_exr
 
-    from .stats import frame_row
+    from .stats import frame_metadata, frame_row
     set_threads(cfg_fields["threads"])
     worker = _worker_name()
     try:
@@ -155,19 +155,6 @@ def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: st
             raise RuntimeError(f"frame {frame} on {worker}: {type(exc).__name__}: {exc}") from exc
         out.append((frame, data, row))
     return out
-
-
-def frame_metadata(row: dict, version: str) -> dict:
-    """The EXR header attributes of a frame (both paths write the same)."""
-    import json
-    meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
-            "Software": f"frustrace {version}"}
-    for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
-        meta[f"frustrace:{k}"] = float(row[k])
-    # the whole row: a frame written by a run that was then killed still gets
-    # its line in stats.json (stats.recovered_row) when a later run ends
-    meta["frustrace:stats"] = json.dumps(row)
-    return meta
 
 
 def _worker_name() -> str:
@@ -199,7 +186,7 @@ def security_of(tls_ca=None, tls_cert=None, tls_key=None):
                     require_encryption=True)
 
 
-def connect(scheduler=None, workers=None, threads_per_worker=1, security=None):
+def connect(scheduler=None, workers=None, security=None):
     """(client, cluster or None): an embedded LocalCluster of `workers`
     processes listening on 127.0.0.1 only, or a connection to `scheduler`
     (SceneError, exit 2, naming the address if it cannot be reached within

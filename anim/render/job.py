@@ -17,17 +17,14 @@ from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.image_io import temp_path, write_exr
 
-from .cluster import frame_metadata
 from .frame_files import frame_file, plan_frames
 from .output_dir import claim, release, remove_stale_temps
 from .paths import writable_dir, writable_file
 from .renderer import SceneRenderer, check_memory, warm_up
 from .settings import shading_of
-from .stats import frame_row, settings_of, write_stats
+from .stats import frame_metadata, frame_row, settings_of, write_stats
 
 VERSION = "0.1.0"
-
-
 MAX_PENDING_WRITES = 0
 
 

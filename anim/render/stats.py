@@ -74,6 +74,18 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
 
 
+def frame_metadata(row: dict, version: str) -> dict:
+    """The EXR header attributes of a frame (both paths write the same)."""
+    meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
+            "Software": f"frustrace {version}"}
+    for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
+        meta[f"frustrace:{k}"] = float(row[k])
+    # the whole row: a frame written by a run that was then killed still gets
+    # its line in stats.json (stats.recovered_row) when a later run ends
+    meta["frustrace:stats"] = json.dumps(row)
+    return meta
+
+
 def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
     size the accelerator really used (the kd-tree's is always KD_PACKET)."""
