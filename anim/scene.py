@@ -340,6 +340,11 @@ class AnimatedScene:
         return np.concatenate(ids).astype(np.int32) if ids else np.zeros(0, np.int32)
 
     @property
+    def moving_object_ranges(self):
+        """(first, end) triangle ranges of the moving objects, one BVH tree each."""
+        return [(o.face_offset, o.face_offset + len(o.faces)) for o in self.moving]
+
+    @property
     def frame_numbers(self):
         return list(range(self.spec.frames.start, self.spec.frames.end + 1))
 

@@ -94,7 +94,9 @@ class Camera(Strict):
 
 
 class Render(Strict):
-    accel: Literal["grid", "kdtree"] = "grid"
+    accel: Literal["grid", "kdtree", "bvh"] = "grid"
+    # structure of the shadow rays; None = the measured fastest (raycore.config.SHADOW_ACCEL)
+    shadow_accel: Optional[Literal["grid", "kdtree", "bvh"]] = None
     packet: int = 32           # one of raycore.config.PACKET_SIZES
     shadows: bool = True
     spp: Annotated[int, Field(ge=1, le=1024)] = 1

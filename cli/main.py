@@ -164,8 +164,9 @@ def parse_frames(text, scene):
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
-@click.option("--accel", type=click.Choice(["grid", "kdtree"]), help="Acceleration structure: the per-frame uniform grid, or an SAH kd-tree with frustum traversal (default: render.accel, grid).")
-@click.option("--packet", type=click.Choice([str(p) for p in PACKET_SIZES]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree always uses 8x8.")
+@click.option("--accel", type=click.Choice(["grid", "kdtree", "bvh"]), help="Acceleration structure of the camera rays: the per-frame uniform grid, an SAH kd-tree with frustum traversal, or the per-frame BVH (default: render.accel, grid).")
+@click.option("--shadow-accel", type=click.Choice(["grid", "kdtree", "bvh"]), help="Acceleration structure of the shadow rays (default: render.shadow_accel, else bvh, measured fastest).")
+@click.option("--packet", type=click.Choice([str(p) for p in PACKET_SIZES]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree and the BVH always use 8x8.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
@@ -196,7 +197,7 @@ def parse_frames(text, scene):
 @click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
-def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, spp, max_error,
+def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads, no_shadows, spp, max_error,
            stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
            tls_ca, tls_cert, tls_key):
     """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
@@ -221,12 +222,12 @@ def render(anim_yaml, out_dir, frames_text, accel, packet, threads, no_shadows, 
     elif scheduler and not threads:
         n_threads = 0                      # each worker: all of its machine's cores
     width, height = res if res else (None, None)
-    if packet and (accel or spec.render.accel) == "kdtree":
-        from raycore.frame import KD_PACKET
-        click.echo(f"frustrace: warning: --packet is for the grid; the kd-tree traces "
-                   f"{KD_PACKET}x{KD_PACKET} packets", err=True)
+    if packet and (accel or spec.render.accel) in ("kdtree", "bvh"):
+        click.echo(f"frustrace: warning: --packet is for the grid; the {accel or spec.render.accel} "
+                   f"traces 8x8 packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
-                    max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, width=width, height=height)
+                    max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
+                    width=width, height=height)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"
@@ -289,7 +290,9 @@ def _int_list(text, name, allowed=None):
                                                            "image error study of --error.")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
               help="Frames per configuration (medians are reported; a warm-up frame comes first).")
-@click.option("--accel", default="grid", show_default=True, help="Acceleration structures, comma-separated: grid, kdtree.")
+@click.option("--accel", default="grid", show_default=True, help="Acceleration structures of the camera rays, comma-separated: grid, kdtree, bvh.")
+@click.option("--shadow-accel", "shadow_accels", default="bvh", show_default=True,
+              help="Acceleration structures of the shadow rays, comma-separated: grid, kdtree, bvh (a row for each).")
 @click.option("--packet", "packets", default="8,16,32", show_default=True, help="Packet sizes to compare, comma-separated.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
@@ -307,7 +310,7 @@ def _int_list(text, name, allowed=None):
                    "are installed (embreex, Open3D, Mitsuba 3: pip install 'frustrace[peers]'), "
                    "rebuilt every frame, one shadow ray per hit and light; adds their rows and "
                    "frustrace's fps_full over the best peer's.")
-def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_report, plot_path, peers):
+def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_path, error_report, plot_path, peers):
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
@@ -340,9 +343,13 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
         write_report(report, plot_path, json_path)
         click.echo(f"wrote {plot_path} and {json_path}")
         return
+    from raycore.config import ACCELS
     accels = [a.strip() for a in accel.split(",") if a.strip()]
-    if not accels or any(a not in ("grid", "kdtree") for a in accels):
-        raise click.BadParameter("comma-separated grid, kdtree", param_hint="--accel")
+    if not accels or any(a not in ACCELS for a in accels):
+        raise click.BadParameter("comma-separated grid, kdtree, bvh", param_hint="--accel")
+    shadow_list = [a.strip() for a in shadow_accels.split(",") if a.strip()]
+    if not shadow_list or any(a not in ACCELS for a in shadow_list):
+        raise click.BadParameter("comma-separated grid, kdtree, bvh", param_hint="--shadow-accel")
     n_threads = set_threads(threads)
     peer_list = []
     if peers:
@@ -353,7 +360,7 @@ def bench(scenes, res, n_frames, accel, packets, threads, json_path, error_repor
                                    "pip install 'frustrace[peers]'")
         click.echo(f"peers: {', '.join(p.name for p in peer_list)}", err=True)
     rows = run_bench(names, res, n_frames, _int_list(packets, "--packet", PACKET_SIZES), n_threads, accels,
-                     peer_list)
+                     peer_list, shadow_list)
     bench_table(rows)
     if plot_path:
         from .bench import plot_phases

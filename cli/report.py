@@ -52,19 +52,19 @@ def bench_table(rows):
     per scene marked; with peers, frustrace's fps_full over the best peer's."""
     table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
     with_peers = any("vs_best_peer" in r for r in rows)
-    for col in ("scene", "accel", "tris", "res", "packet", "threads", "interp", "build", "trace", "shade",
+    for col in ("scene", "accel", "shadows", "tris", "res", "packet", "threads", "interp", "build", "trace", "shade",
                 "shadow", "write", "fps_raycast", "fps_full", "Mrays/s", "shadow Mrays/s", "tests/ray",
                 *(["full / best peer"] if with_peers else [])):
         table.add_column(col, justify="right")
     best = {}
     for r in rows:
         if r["fps_raycast"] > best.get(r["scene"], (0, None))[0]:
-            best[r["scene"]] = (r["fps_raycast"], (r["accel"], r["packet"]))
+            best[r["scene"]] = (r["fps_raycast"], (r["accel"], r.get("shadow_accel"), r["packet"]))
     for r in rows:
-        mark = " *" if best[r["scene"]][1] == (r["accel"], r["packet"]) else ""
+        mark = " *" if best[r["scene"]][1] == (r["accel"], r.get("shadow_accel"), r["packet"]) else ""
         peer = r.get("peer", False)
         ratio = [f"{r['vs_best_peer']:.2f}x" if "vs_best_peer" in r else "-"] if with_peers else []
-        table.add_row(r["scene"], r["accel"], str(r["triangles"]), str(r["resolution"]),
+        table.add_row(r["scene"], r["accel"], r.get("shadow_accel", "-"), str(r["triangles"]), str(r["resolution"]),
                       ("-" if peer else str(r["packet"])) + mark,
                       str(r["threads"]), f"{r['interp_ms']:.2f}", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
                       f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['write_ms']:.1f}",
@@ -75,6 +75,12 @@ def bench_table(rows):
     if not console.is_terminal:
         console = Console(width=210)      # a pipe or file gets the whole table
     console.print(table)
+    bvh = [r for r in rows if "bvh_build_ms" in r]
+    for r in bvh:
+        console.print(f"{r['scene']}: BVH build {r['bvh_build_ms']:.2f} ms ({r['bvh_build_ms_per_100k']:.2f} "
+                      f"per 100K triangles), refit {r['bvh_refit_ms']:.2f} ms of "
+                      f"{r['moving_triangles']:,} moving triangles ({r['bvh_refit_ms_per_100k']:.2f} per 100K); "
+                      f"{r['bvh_rebuilds']} rebuilds, SAH growth up to {r['bvh_max_sah_growth']:.2f}x")
     if any(r.get("peer") for r in rows):
         console.print("peers: structure rebuilt every frame, one shadow ray per hit and light; no shading "
                       "(shade 0) and rays made before the clock starts, both in their favour")

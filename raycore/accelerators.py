@@ -7,17 +7,26 @@ structure once and never asks which one it has.
              Traversal (grid_drivers.py), shadow rays in light-space packets
              (shadow_rays.py), ray batches in packets;
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
-             shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py).
+             shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py);
+  BvhAccel   the per-frame BVH (refit trees per object under a top level,
+             scene_bvh.py): every kind of ray in packets of 64 that share an
+             origin or a direction (bvh_trace.py).
 
-Counters are named (counters.Counters): `visits` are grid cells or kd
-nodes, and `candidates` are triangles surviving the grid's culling or kd leaves.
+Counters are named (counters.Counters): `visits` are grid cells or tree
+nodes, and `candidates` are triangles surviving the grid's culling or the
+leaves a tree's packets reached.
 """
+import numpy as np
+
+from .bvh_build import Bvh
+from .bvh_trace import bvh_light_visibility, bvh_trace_camera, bvh_trace_rays
 from .counters import Counters
 from .grid_build import Grid
 from .kdtree_build import KdTree
 from .kdtree_packets import kd_trace_camera
 from .kdtree_rays import kd_light_visibility, kd_trace_rays
 from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera, trace_rays
+from .workspace import scratch
 
 # the kd-tree's camera packets are always KD_PACKET^2 rays
 KD_PACKET = 8
@@ -67,4 +76,28 @@ class KdAccel:
 
     def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:
         h = Hits(*kd_trace_rays(self.tree, self.tri_verts, origins, dirs, t_min, t_max, any_hit))
+        return h._replace(counters=Counters.of(h.counters))
+
+
+class BvhAccel:
+    """The frame's BVH (bvh_build.Bvh, kept by scene_bvh.SceneBvh) over tri_verts."""
+    name = "bvh"
+    packet = 8          # camera packets are 8x8 pixels
+
+    def __init__(self, bvh: Bvh, tri_verts, workspace=None):
+        self.bvh, self.tri_verts, self.workspace = bvh, tri_verts, workspace
+
+    def trace_camera(self, cam, width, height, jitter):
+        n = width * height
+        out = (scratch(self.workspace, "bvh.t", n), scratch(self.workspace, "bvh.prim", n, np.int32),
+               scratch(self.workspace, "bvh.b1", n), scratch(self.workspace, "bvh.b2", n))
+        hits = Hits(*bvh_trace_camera(self.bvh, cam, width, height, jitter, out))
+        return hits._replace(counters=Counters.of(hits.counters)), row_major_offsets(width, height)
+
+    def trace_shadows(self, rays, vis) -> Counters:
+        _, c = bvh_light_visibility(self.bvh, rays, vis)
+        return Counters.of(c)
+
+    def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:
+        h = Hits(*bvh_trace_rays(self.bvh, origins, dirs, t_min, t_max, any_hit))
         return h._replace(counters=Counters.of(h.counters))

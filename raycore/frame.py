@@ -10,10 +10,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .accelerators import KD_PACKET, GridAccel, KdAccel
+from .accelerators import KD_PACKET, BvhAccel, GridAccel, KdAccel
 from .adaptive import camera_rays_of, refine
 from .camera import camera_basis
-from .config import ADAPTIVE_SPP_CAP, RenderConfig
+from .config import ADAPTIVE_SPP_CAP, SHADOW_ACCEL, RenderConfig
 from .kdtree_build import build_kdtree
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
@@ -144,7 +144,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     Per pass of camera rays (one per sample offset): trace, gather the visible
     surface once (surface.py), trace each light's shadow rays in light-space
-    packets (shadow_rays.py), shade the samples, scatter them into the image."""
+    packets (shadow_rays.py) through cfg.shadow_accel, shade the samples,
+    scatter them into the image."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
@@ -155,22 +156,17 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                 "primary_packets": 0, "primary_visits": 0, "primary_tests": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
-    # the structure is chosen here, once: everything below goes through its
-    # common surface (accelerators.py)
+    lit = [li for li in range(n_lights) if not _light_is_dark(shading.lights[li])]
+    counters["lights_skipped"] = n_lights - len(lit)
+    cast_shadows = cfg.shadows and len(lit) > 0 and geom.faces.shape[0] > 0
+    # the structures are chosen here, once: everything below goes through
+    # their common surface (accelerators.py)
     t0 = time.perf_counter()
-    if cfg.accel == "kdtree":
-        tri_verts = scene_grid.gather(geom.vertices)
-        tree = scene_grid.kd_tree
-        if tree is None:
-            tree = build_kdtree(tri_verts)
-            if scene_grid.all_static:           # a fly-through: build the tree once
-                scene_grid.kd_tree = tree
-        counters["kd_nodes"] = int(len(tree.axis))
-        accel = KdAccel(tree, tri_verts)
-    else:
-        grid, tri_verts = scene_grid.update(geom.vertices)
-        counters["grid_dims"] = [int(d) for d in grid.dims]
-        accel = GridAccel(grid, tri_verts, cfg.packet, cfg.grid_cull, buffers.camera)
+    shadow_name = cfg.shadow_accel or SHADOW_ACCEL
+    tri_verts, built = build_structures({cfg.accel, shadow_name} if cast_shadows else {cfg.accel},
+                                        geom, cfg, scene_grid, buffers, counters)
+    accel = built[cfg.accel]
+    shadow_accel = built.get(shadow_name)
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
 
     t0 = time.perf_counter()
@@ -179,9 +175,6 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)
     bg = np.asarray(cfg.background, np.float32)
-    lit = [li for li in range(n_lights) if not _light_is_dark(shading.lights[li])]
-    counters["lights_skipped"] = n_lights - len(lit)
-    cast_shadows = cfg.shadows and len(lit) > 0 and geom.faces.shape[0] > 0
     # under an error budget the image starts from the pixel centres, and spp
     # is the most samples a pixel may get (adaptive.py)
     offsets = sample_offsets(1 if cfg.max_error > 0 else cfg.spp)
@@ -211,7 +204,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             def trace(li, skip=None):
                 rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
                                  buffers.work, skip)
-                c = accel.trace_shadows(rays, vis[li])
+                c = shadow_accel.trace_shadows(rays, vis[li])
                 counters["shadow_rays"] += rays.n_active
                 counters["shadow_rays_skipped"] += n_vis - rays.n_active
                 counters["tri_tests"] += c.tests
@@ -275,6 +268,32 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["rays_left_out"] = adaptive_cap(cfg) * W * H - counters["rays"]
     return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs.channels(H, W) if aovs else {},
                        timings, counters, samples)
+
+
+def build_structures(names, geom, cfg, scene_grid, buffers, counters):
+    """(tri_verts, {name: accelerator}) for this frame's vertices: the
+    triangles gathered once, then each named structure built (grid, kd-tree)
+    or updated (the BVH's refit trees, scene_bvh.py) over them."""
+    built = {}
+    if "grid" in names:
+        grid, tri_verts = scene_grid.update(geom.vertices)
+        counters["grid_dims"] = [int(d) for d in grid.dims]
+        built["grid"] = GridAccel(grid, tri_verts, cfg.packet, cfg.grid_cull, buffers.camera)
+    else:
+        tri_verts = scene_grid.gather(geom.vertices)
+    if "kdtree" in names:
+        tree = scene_grid.kd_tree
+        if tree is None:
+            tree = build_kdtree(tri_verts)
+            if scene_grid.all_static:           # a fly-through: build the tree once
+                scene_grid.kd_tree = tree
+        counters["kd_nodes"] = int(len(tree.axis))
+        built["kdtree"] = KdAccel(tree, tri_verts)
+    if "bvh" in names:
+        trees = scene_grid.scene_bvh()
+        built["bvh"] = BvhAccel(trees.update(tri_verts), tri_verts, buffers.work)
+        counters.update(trees.stats)
+    return tri_verts, built
 
 
 def adaptive_cap(cfg: RenderConfig) -> int:

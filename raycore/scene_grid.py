@@ -22,6 +22,7 @@ import numpy as np
 
 from .grid_build import Grid, bin_triangles, finite_bounds, grid_shape, merge_cells, point_bounds
 from .mesh import gather_some_triangles, gather_triangles, vertex_normals, vertex_normals_of
+from .scene_bvh import SceneBvh
 
 
 MIN_STATIC_SHARE = 0.3
@@ -35,8 +36,12 @@ class SceneGrid:
     """Per-frame geometry of one scene. `moving_tris`: ids of the triangles
     whose vertices may move (None: all of them)."""
 
-    def __init__(self, faces, n_vertices, vf_start, vf_faces, density, moving_tris=None):
+    def __init__(self, faces, n_vertices, vf_start, vf_faces, density, moving_tris=None, object_ranges=None):
+        """object_ranges: (first, end) triangle ranges of the moving objects,
+        one BVH tree each (scene_bvh.py); None: all moving triangles in one."""
         self.faces, self.vf_start, self.vf_faces = faces, vf_start, vf_faces
+        self.moving_tris, self.object_ranges = moving_tris, object_ranges
+        self.bvh = None
         self.density = density
         n = faces.shape[0]
         self.tri_verts = np.empty((n, 9), np.float32)
@@ -53,6 +58,12 @@ class SceneGrid:
         self.normals_done = False
         self.kd_tree = None         # kept by frame.render_frame when nothing moves
         self.static_shape = self.static_cells = self.static_bounds = None
+
+    def scene_bvh(self):
+        """The scene's BVH trees (made on first use, kept across frames)."""
+        if self.bvh is None:
+            self.bvh = SceneBvh.of_objects(self.faces.shape[0], self.object_ranges, self.moving_tris)
+        return self.bvh
 
     @property
     def all_static(self):

@@ -1,18 +1,19 @@
 """One harness for every acceleration structure through its common surface
 (raycore/accelerators.py): the same seeded rays — random, axis-parallel,
 with zero direction components, aimed at vertices and edge midpoints, from
-inside the structure — through the grid with and without culling and the
-kd-tree, against brute force over all triangles: closest hit, any hit, and
+inside the structure — through the grid with and without culling, the
+kd-tree and the BVH, against brute force over all triangles: closest hit, any hit, and
 any hit cut short before the closest hit."""
 import numpy as np
 import pytest
 
 from conftest import icosphere_mesh, soup, tri_verts_of
 from oracles import brute_force_closest, kernel_camera_rays
-from raycore.accelerators import GridAccel, KdAccel
+from raycore.accelerators import BvhAccel, GridAccel, KdAccel
 from raycore.camera import camera_basis
 from raycore.grid_build import build_grid
 from raycore.kdtree_build import build_kdtree
+from raycore.scene_bvh import SceneBvh
 
 
 def scene(rng):
@@ -43,8 +44,10 @@ def rays(rng, tv):
 
 def accelerators(tv):
     grid = build_grid(tv)
+    # the BVH as a renderer makes it: the sphere a moving object, the rest static
+    trees = SceneBvh.of_objects(len(tv), [(0, N_SPHERE)])
     return {"grid": GridAccel(grid, tv, 8), "grid-nocull": GridAccel(grid, tv, 8, cull=False),
-            "kdtree": KdAccel(build_kdtree(tv), tv)}
+            "kdtree": KdAccel(build_kdtree(tv), tv), "bvh": BvhAccel(trees.update(tv), tv)}
 
 
 def near_edge(b1, b2, eps=1e-4):
@@ -68,7 +71,7 @@ def agree(got, want):
     assert np.all(close | grazing[both]), np.nonzero(both)[0][~(close | grazing[both])]
 
 
-@pytest.mark.parametrize("name", ["grid", "grid-nocull", "kdtree"])
+@pytest.mark.parametrize("name", ["grid", "grid-nocull", "kdtree", "bvh"])
 def test_closest_any_and_short_any_hit_match_brute_force(rng, name):
     tv = scene(rng)
     o, d = rays(rng, tv)

@@ -18,7 +18,9 @@ from anim.render.renderer import SceneRenderer
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
+from raycore.config import SHADOW_ACCEL
 from raycore.frame import KD_PACKET, CameraPose
+from raycore.scene_bvh import SceneBvh
 from raycore.image_io import write_exr
 
 SCENE_NAMES = tuple(builtin.ALL)
@@ -33,11 +35,15 @@ def scene_file(name: str, workdir: Path) -> Path:
 
 
 def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int,
-                accel: str = "grid", workdir: Path = None, depth_out: list = None) -> dict:
+                accel: str = "grid", workdir: Path = None, depth_out: list = None,
+                shadow_accel: str = SHADOW_ACCEL) -> dict:
     """One row: medians over n_frames frames (after a warm-up frame). With
-    depth_out, the first measured frame's Z is appended to it."""
+    depth_out, the first measured frame's Z is appended to it. The BVH's
+    first build is timed on its own (the warm-up frame's compile aside:
+    a second renderer builds it again) and reported per 100K triangles."""
     scene = AnimatedScene(path)
-    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=(), accel=accel)
+    cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=(), accel=accel,
+                    shadow_accel=shadow_accel)
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
@@ -53,8 +59,39 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
         if i > 0:
             rows.append({"interp_ms": interp_ms, **result.timings, "write_ms": write_ms,
                          "tri_tests": result.counters["tri_tests"],
-                         "shadow_rays": result.counters["shadow_rays"]})
-    return _row(name, accel, packet if accel == "grid" else KD_PACKET, threads, scene, res, rows)
+                         "shadow_rays": result.counters["shadow_rays"],
+                         **{k: result.counters[k] for k in BVH_COUNTERS if k in result.counters}})
+    row = _row(name, accel, packet if accel == "grid" else KD_PACKET, threads, scene, res, rows)
+    row["shadow_accel"] = shadow_accel
+    if "bvh" in (accel, shadow_accel):
+        row.update(bvh_build_costs(scene, renderer, rows))
+    return row
+
+
+BVH_COUNTERS = ("bvh_refit_ms", "bvh_top_ms", "bvh_rebuilt", "bvh_sah_growth")
+
+
+def bvh_build_costs(scene, renderer, rows):
+    """The BVH's full build (all trees, on the first frame's triangles) and
+    median refit of the moving trees, in ms and in ms per 100K triangles;
+    how often a refit tree was rebuilt, and its largest SAH growth."""
+    trees = SceneBvh.of_objects(scene.faces.shape[0], scene.moving_object_ranges, scene.moving_triangles)
+    tri_verts = renderer.scene_grid.tri_verts
+    builds = []
+    for _ in range(3):
+        trees.first = True
+        t0 = time.perf_counter()
+        trees.update(tri_verts)
+        builds.append((time.perf_counter() - t0) * 1e3)
+    n_moving = sum(len(g) for g, m in zip(trees.groups, trees.moving) if m)
+    n_all = scene.faces.shape[0]
+    refit = median_ms(rows, "bvh_refit_ms")
+    return {"bvh_build_ms": float(np.median(builds)),
+            "bvh_build_ms_per_100k": float(np.median(builds)) * 1e5 / max(n_all, 1),
+            "bvh_refit_ms": refit, "moving_triangles": n_moving,
+            "bvh_refit_ms_per_100k": refit * 1e5 / n_moving if n_moving else 0.0,
+            "bvh_rebuilds": int(sum(r.get("bvh_rebuilt", 0) for r in rows)),
+            "bvh_max_sah_growth": max((r.get("bvh_sah_growth", 1.0) for r in rows), default=1.0)}
 
 
 def _row(name, accel, packet, threads, scene, res, rows):
@@ -99,7 +136,7 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
     return row
 
 
-def run_bench(names, res, n_frames, packets, threads, accels=("grid",), peers=()):
+def run_bench(names, res, n_frames, packets, threads, accels=("grid",), peers=(), shadow_accels=(SHADOW_ACCEL,)):
     """Rows for every scene, structure and packet size, then one per peer
     and scene; frustrace rows get vs_best_peer (fps_full over the best
     peer's fps_full on that scene)."""
@@ -108,10 +145,11 @@ def run_bench(names, res, n_frames, packets, threads, accels=("grid",), peers=()
         rows = []
         for n in names:
             depth = []
-            for accel in accels:      # the kd-tree's packets are always KD_PACKET^2
+            for accel in accels:      # the kd-tree's and the BVH's packets are always 8x8
                 for p in (packets if accel == "grid" else packets[:1]):
-                    rows.append(bench_scene(paths[n], n, res, n_frames, p, threads, accel, Path(tmp),
-                                            depth))
+                    for shadow in shadow_accels:
+                        rows.append(bench_scene(paths[n], n, res, n_frames, p, threads, accel, Path(tmp),
+                                                depth, shadow))
             peer_rows = [bench_peer(peer, paths[n], n, res, n_frames, threads, rows[-1]["interp_ms"],
                                     depth[0]) for peer in peers]
             best = max((r["fps_full"] for r in peer_rows), default=0.0)

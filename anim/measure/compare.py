@@ -7,11 +7,16 @@ from anim.render.renderer import SceneRenderer
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
+from raycore.accelerators import KD_PACKET, BvhAccel
 
+BVH_PACKET = BvhAccel.packet
+
+# each structure traces every ray of its frames, shadow rays included
 STRUCTURES = {
-    "grid": {"accel": "grid"},
-    "grid-nocull": {"accel": "grid", "grid_cull": False},   # no frustum culling, no mailboxes
-    "kdtree": {"accel": "kdtree"},
+    "grid": {"accel": "grid", "shadow_accel": "grid"},
+    "grid-nocull": {"accel": "grid", "shadow_accel": "grid", "grid_cull": False},   # no culling, no mailboxes
+    "kdtree": {"accel": "kdtree", "shadow_accel": "kdtree"},
+    "bvh": {"accel": "bvh", "shadow_accel": "bvh"},
 }
 # Wald et al. 2006 (Coherent Grid Traversal), Table: ray/triangle tests per frame
 PUBLISHED_TESTS = {"grid-nocull": 14.0e6, "grid": 0.9e6, "kdtree": 0.85e6}
@@ -65,9 +70,8 @@ def compare(path, names, n_frames, res, threads, label=None):
             if i == 0:      # kept past later frames, which reuse the renderer's image ring
                 images[name] = result._replace(rgba=result.rgba.copy(), z=result.z.copy())
         fps_raycast, fps_full = fps_of(timings)
-        from raycore.frame import KD_PACKET
         rows.append({"structure": name, "triangles": int(scene.faces.shape[0]), "resolution": [width, height],
-                     "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
+                     "packet": {"kdtree": KD_PACKET, "bvh": BVH_PACKET}.get(cfg.accel, cfg.packet),
                      "frames": len(frames),
                      **{k: median_ms(timings, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
                                                          "shadow_ms", "primary_tests", "tri_tests",

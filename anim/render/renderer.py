@@ -25,7 +25,7 @@ class SceneRenderer:
                                     n_images=pending_writes + 2)
         # static objects: gathered, binned and given normals once (raycore/scene_grid.py)
         self.scene_grid = SceneGrid(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
-                                    scene.moving_triangles)
+                                    scene.moving_triangles, scene.moving_object_ranges)
 
     def render(self, t):
         """(interp_ms, FrameResult) of the frame at time t."""

@@ -13,7 +13,7 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
     spec = scene.spec
     base = dict(width=spec.output.resolution[0], height=spec.output.resolution[1],
                 packet=spec.render.packet, spp=spec.render.spp, shadows=spec.render.shadows,
-                accel=spec.render.accel, grid_density=spec.render.grid_density,
+                accel=spec.render.accel, shadow_accel=spec.render.shadow_accel or "", grid_density=spec.render.grid_density,
                 light_probes=spec.render.light_probes, max_error=spec.render.max_error,
                 background=tuple(spec.render.background), ambient=spec.render.ambient,
                 aovs=tuple(spec.output.aovs))

@@ -1,0 +1,312 @@
+"""Bounding volume hierarchy: binned-SAH build, refit, and its SAH cost.
+
+Flat arrays, no pointers (as the kd-tree): node i is a leaf when count[i] > 0,
+listing count[i] references from child[i]; else its two children are
+child[i] and child[i] + 1 (allocated as a pair), and count[i] = -1 - axis
+names the axis it was split on (traversal visits the child nearer along it
+first). A node is one 32-byte row: its box (6 floats), child and count
+(two int32 in the same row, through an int32 view of the same memory), so
+that a visit reads one cache line, and two siblings share one: separate
+arrays for box, child, count and axis cost four. A reference
+is a triangle: `tri` holds its global id and `verts` its corners in leaf
+order, refreshed by every refit, so that a leaf's triangles are read from one
+contiguous run of memory instead of being gathered from the whole scene.
+
+A build writes into a region of the arrays given to it (first node, first
+reference), with absolute child indices, so that many trees (one per moving
+object, one for all static objects) live in one set of arrays and a small
+top-level tree over their roots joins them (scene_bvh.py). Unused nodes of
+a region are marked child = -1, count = 0 and skipped.
+
+Binned SAH (Wald 2007, "On fast construction of SAH-based bounding volume
+hierarchies"): centroids binned into N_BINS per axis, all three axes in one
+pass over the node's primitives, the cheapest of 3 (N_BINS - 1) planes taken.
+Keyframed meshes keep their topology, so a tree built once is refit every
+frame (boxes recomputed bottom-up, nodes in reverse order since children
+always follow their parent) and rebuilt only when its SAH cost has grown
+past a threshold measured against the cost at its last build.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from numba import prange
+
+from ._jit import kernel, parallel_kernel
+
+N_BINS = 16
+# SAH constants: a node visit costs about as much as one ray/triangle test
+# (both are a box or edge test over a packet's rays); leaves up to MAX_LEAF
+MAX_LEAF = 8
+C_TRAVERSE = np.float32(1.0)
+C_INTERSECT = np.float32(1.0)
+STACK = 64           # build and traversal depth bound (trees stay far shallower: leaves <= 8, binned splits)
+
+
+CHILD, COUNT = 6, 7          # int32 columns of a node row
+
+
+class Bvh(NamedTuple):
+    node: np.ndarray      # (n_nodes, 8) f32: lo x, y, z, hi x, y, z, then two int32 (node_i)
+    node_i: np.ndarray    # the same memory as int32: [:, CHILD] first child (inner) or first
+                          # reference (leaf), -1 unused; [:, COUNT] references (leaf), -1 - axis (inner)
+    tri: np.ndarray       # (n_refs,) i32: global triangle id of each reference
+    verts: np.ndarray     # (n_refs, 9) f32: its corners, in leaf order
+
+    @property
+    def box(self):
+        return self.node[:, :6]
+
+    @property
+    def child(self):
+        return self.node_i[:, CHILD]
+
+    @property
+    def count(self):
+        """References of a leaf; 0 or less for inner and unused nodes."""
+        return self.node_i[:, COUNT]
+
+
+def empty_bvh(n_nodes, n_refs) -> Bvh:
+    node = np.zeros((n_nodes, 8), np.float32)
+    node_i = node.view(np.int32)
+    node_i[:, CHILD] = -1
+    return Bvh(node, node_i, np.zeros(n_refs, np.int32), np.zeros((n_refs, 9), np.float32))
+
+
+@parallel_kernel
+def prim_bounds(tri_verts, tris, bounds, centroids):
+    """Box (6) and centroid (3) of each triangle tris[k] of tri_verts. A
+    corner that is not finite is left out of the box (the grid does the
+    same); a triangle with no finite corner gets an empty box."""
+    for k in prange(tris.shape[0]):
+        t = tris[k]
+        for a in range(3):
+            lo = np.float32(np.inf)
+            hi = np.float32(-np.inf)
+            for c in range(3):
+                x = tri_verts[t, 3 * c + a]
+                if np.isfinite(x):
+                    lo = min(lo, x)
+                    hi = max(hi, x)
+            bounds[k, a] = lo
+            bounds[k, 3 + a] = hi
+            centroids[k, a] = np.float32(0.5) * (lo + hi) if lo <= hi else np.float32(0.0)
+
+
+@kernel
+def _area(x0, y0, z0, x1, y1, z1):
+    dx = max(x1 - x0, np.float32(0.0))
+    dy = max(y1 - y0, np.float32(0.0))
+    dz = max(z1 - z0, np.float32(0.0))
+    return dx * dy + dy * dz + dz * dx
+
+
+@kernel
+def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
+    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
+    node region starting at node0 (root there, children in pairs after it).
+    `order` (m,) receives the primitives in leaf order: leaf k's references
+    are order[child[k] - ref0 ...] for the caller's ref0 (the caller adds
+    its reference base to child of every leaf). Returns the nodes used."""
+    m = bounds.shape[0]
+    for i in range(m):
+        order[i] = i
+    # stack rows: node, first primitive, end
+    st_node = np.empty(STACK * 2, np.int64)
+    st_s = np.empty(STACK * 2, np.int64)
+    st_e = np.empty(STACK * 2, np.int64)
+    st_node[0], st_s[0], st_e[0] = node0, 0, m
+    top = 1
+    alloc = node0 + 1
+    bin_n = np.zeros((3, N_BINS), np.int64)
+    bin_box = np.empty((3, N_BINS, 6), np.float32)
+    r_area = np.empty(N_BINS, np.float32)
+    r_n = np.empty(N_BINS, np.int64)
+    while top > 0:
+        top -= 1
+        node, s, e = st_node[top], st_s[top], st_e[top]
+        n = e - s
+        # node box and centroid bounds
+        lo0 = lo1 = lo2 = np.float32(np.inf)
+        hi0 = hi1 = hi2 = np.float32(-np.inf)
+        c_lo0 = c_lo1 = c_lo2 = np.float32(np.inf)
+        c_hi0 = c_hi1 = c_hi2 = np.float32(-np.inf)
+        for k in range(s, e):
+            p = order[k]
+            lo0 = min(lo0, bounds[p, 0])
+            lo1 = min(lo1, bounds[p, 1])
+            lo2 = min(lo2, bounds[p, 2])
+            hi0 = max(hi0, bounds[p, 3])
+            hi1 = max(hi1, bounds[p, 4])
+            hi2 = max(hi2, bounds[p, 5])
+            c_lo0 = min(c_lo0, centroids[p, 0])
+            c_lo1 = min(c_lo1, centroids[p, 1])
+            c_lo2 = min(c_lo2, centroids[p, 2])
+            c_hi0 = max(c_hi0, centroids[p, 0])
+            c_hi1 = max(c_hi1, centroids[p, 1])
+            c_hi2 = max(c_hi2, centroids[p, 2])
+        box[node, 0], box[node, 1], box[node, 2] = lo0, lo1, lo2
+        box[node, 3], box[node, 4], box[node, 5] = hi0, hi1, hi2
+        c_lo = (c_lo0, c_lo1, c_lo2)
+        ext = (c_hi0 - c_lo0, c_hi1 - c_lo1, c_hi2 - c_lo2)
+        best_cost = np.float32(np.inf)
+        best_axis = -1
+        best_bin = 0
+        if n > 1 and (ext[0] > 0 or ext[1] > 0 or ext[2] > 0):
+            scale = np.empty(3, np.float32)
+            for a in range(3):
+                scale[a] = np.float32(N_BINS) * np.float32(0.99999) / ext[a] if ext[a] > 0 else np.float32(0.0)
+                for b in range(N_BINS):
+                    bin_n[a, b] = 0
+                    bin_box[a, b, 0] = bin_box[a, b, 1] = bin_box[a, b, 2] = np.float32(np.inf)
+                    bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
+            for k in range(s, e):
+                p = order[k]
+                for a in range(3):
+                    b = min(int((centroids[p, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                    bin_n[a, b] += 1
+                    for q in range(3):
+                        bin_box[a, b, q] = min(bin_box[a, b, q], bounds[p, q])
+                        bin_box[a, b, 3 + q] = max(bin_box[a, b, 3 + q], bounds[p, 3 + q])
+            for a in range(3):
+                if ext[a] <= 0:
+                    continue
+                # right-to-left sweep: area and count of bins b..N_BINS-1
+                x0 = y0 = z0 = np.float32(np.inf)
+                x1 = y1 = z1 = np.float32(-np.inf)
+                cnt = 0
+                for b in range(N_BINS - 1, 0, -1):
+                    cnt += bin_n[a, b]
+                    x0 = min(x0, bin_box[a, b, 0])
+                    y0 = min(y0, bin_box[a, b, 1])
+                    z0 = min(z0, bin_box[a, b, 2])
+                    x1 = max(x1, bin_box[a, b, 3])
+                    y1 = max(y1, bin_box[a, b, 4])
+                    z1 = max(z1, bin_box[a, b, 5])
+                    r_n[b] = cnt
+                    r_area[b] = _area(x0, y0, z0, x1, y1, z1) if cnt > 0 else np.float32(0.0)
+                x0 = y0 = z0 = np.float32(np.inf)
+                x1 = y1 = z1 = np.float32(-np.inf)
+                cnt = 0
+                for b in range(N_BINS - 1):
+                    cnt += bin_n[a, b]
+                    x0 = min(x0, bin_box[a, b, 0])
+                    y0 = min(y0, bin_box[a, b, 1])
+                    z0 = min(z0, bin_box[a, b, 2])
+                    x1 = max(x1, bin_box[a, b, 3])
+                    y1 = max(y1, bin_box[a, b, 4])
+                    z1 = max(z1, bin_box[a, b, 5])
+                    if cnt == 0 or r_n[b + 1] == 0:
+                        continue
+                    cost = (_area(x0, y0, z0, x1, y1, z1) * np.float32(cnt)
+                            + r_area[b + 1] * np.float32(r_n[b + 1]))
+                    if cost < best_cost:
+                        best_cost, best_axis, best_bin = cost, a, b
+        area = _area(lo0, lo1, lo2, hi0, hi1, hi2)
+        split_cost = C_TRAVERSE + C_INTERSECT * best_cost / area if area > 0 else np.float32(np.inf)
+        leaf_cost = C_INTERSECT * np.float32(n)
+        if best_axis < 0 and n > max_leaf:
+            # centroids all in one point (or no finite area): split by count
+            best_axis = -2
+        if n <= max_leaf and (best_axis < 0 or leaf_cost <= split_cost):
+            child[node] = s
+            count[node] = n
+            continue
+        if best_axis >= 0:
+            a = best_axis
+            i, j = s, e - 1
+            while i <= j:
+                b = min(int((centroids[order[i], a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                if b <= best_bin:
+                    i += 1
+                else:
+                    order[i], order[j] = order[j], order[i]
+                    j -= 1
+            mid = i
+            split_axis = a
+        else:
+            mid = s + n // 2
+            split_axis = 0
+        if mid == s or mid == e:
+            mid = s + n // 2
+        child[node] = alloc
+        count[node] = -1 - split_axis
+        st_node[top], st_s[top], st_e[top] = alloc + 1, mid, e
+        st_node[top + 1], st_s[top + 1], st_e[top + 1] = alloc, s, mid
+        top += 2
+        alloc += 2
+    return alloc - node0
+
+
+@kernel
+def sah_cost(box, child, count, root):
+    """SAH cost of the tree under `root`, relative to the root's area: the
+    expected number of node visits and triangle tests of a random ray that
+    hits the root box (traversal and test weighted by the build's constants)."""
+    root_area = _area(box[root, 0], box[root, 1], box[root, 2], box[root, 3], box[root, 4], box[root, 5])
+    if not root_area > 0:
+        return np.float32(0.0)
+    stack = np.empty(STACK * 2, np.int64)
+    stack[0] = root
+    top = 1
+    total = np.float64(0.0)
+    while top > 0:
+        top -= 1
+        i = stack[top]
+        a = np.float64(_area(box[i, 0], box[i, 1], box[i, 2], box[i, 3], box[i, 4], box[i, 5]))
+        if count[i] > 0:
+            total += a * np.float64(C_INTERSECT) * count[i]
+        else:
+            total += a * np.float64(C_TRAVERSE)
+            stack[top] = child[i]
+            stack[top + 1] = child[i] + 1
+            top += 2
+    return np.float32(total / root_area)
+
+
+@parallel_kernel
+def refit_regions(tri_verts, node_lo, node_hi, box, child, count, tri, verts):
+    """Refit the trees whose nodes lie in [node_lo[k], node_hi[k]) to the
+    triangles' positions now: every leaf (in parallel) copies its triangles'
+    corners into `verts` and takes their box; then inner nodes, in reverse
+    order (children after parents), take the union of their children's."""
+    n_regions = node_lo.shape[0]
+    for k in range(n_regions):
+        lo_k = node_lo[k]
+        hi_k = node_hi[k]
+        n = hi_k - lo_k
+        for jj in prange(n):
+            i = lo_k + jj
+            c = count[i]
+            if c <= 0:
+                continue
+            x0 = y0 = z0 = np.float32(np.inf)
+            x1 = y1 = z1 = np.float32(-np.inf)
+            for r in range(child[i], child[i] + c):
+                t = tri[r]
+                for q in range(9):
+                    verts[r, q] = tri_verts[t, q]
+                for v in range(3):
+                    x = tri_verts[t, 3 * v]
+                    y = tri_verts[t, 3 * v + 1]
+                    z = tri_verts[t, 3 * v + 2]
+                    # corners that are not finite are left out, as in the build
+                    if np.isfinite(x):
+                        x0 = min(x0, x)
+                        x1 = max(x1, x)
+                    if np.isfinite(y):
+                        y0 = min(y0, y)
+                        y1 = max(y1, y)
+                    if np.isfinite(z):
+                        z0 = min(z0, z)
+                        z1 = max(z1, z)
+            box[i, 0], box[i, 1], box[i, 2] = x0, y0, z0
+            box[i, 3], box[i, 4], box[i, 5] = x1, y1, z1
+        for i in range(hi_k - 1, lo_k - 1, -1):
+            if count[i] > 0 or child[i] < 0:
+                continue
+            l = child[i]
+            for q in range(3):
+                box[i, q] = min(box[l, q], box[l + 1, q])
+                box[i, 3 + q] = max(box[l, 3 + q], box[l + 1, 3 + q])

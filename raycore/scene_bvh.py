@@ -1,0 +1,157 @@
+"""One BVH per frame, kept up to date with the least work: a tree per moving
+object, refit every frame, one tree for all static objects, built once, and
+a small top-level tree over their roots, built every frame.
+
+Keyframed meshes keep their topology, so each moving object's tree is built
+once and then refit (bvh_build.refit_regions): its boxes follow the
+vertices. Refitting keeps the tree's shape, which suits rigid and gently
+deforming motion; when an object's parts move apart, its boxes grow and
+overlap, so the SAH cost of every refit tree is compared with its cost at
+the last build, and the tree is rebuilt once it has grown by REBUILD_GROWTH.
+Static objects (a ground, a set) never change and are gathered into one
+tree; the top level over the trees' roots costs microseconds, and it keeps a
+detailed object inside a large set from crowding the set's nodes (the
+teapot in a stadium, which a uniform grid suffers from).
+
+All trees live in one set of arrays (bvh_build.Bvh): the top level in
+nodes 0..2G-1 (G trees), then each tree's region of 2m nodes and m
+references (m triangles). A leaf of the top level is a copy of a tree's root
+node, so a traversal sees one tree and never asks which part it is in.
+"""
+import time
+
+import numpy as np
+
+from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit_regions, sah_cost
+
+# a refit tree is rebuilt when its SAH cost exceeds this many times its cost
+# at the last build (README: measured on the runner and hand, where refit
+# trees drift by at most ~10 % over a whole animation)
+REBUILD_GROWTH = 1.5
+
+
+class SceneBvh:
+    """groups: one int32 array of triangle ids per tree; moving[g] says whether
+    tree g must follow the vertices every frame."""
+
+    def __init__(self, n_tris, groups, moving):
+        kept = [(np.ascontiguousarray(g, np.int32), bool(m)) for g, m in zip(groups, moving) if len(g)]
+        self.groups = [g for g, _ in kept]
+        self.moving = [m for _, m in kept]
+        groups = self.groups
+        n_groups = len(groups)
+        self.top_nodes = max(2 * n_groups, 1)
+        self.node_lo = np.zeros(n_groups, np.int64)
+        self.ref_lo = np.zeros(n_groups, np.int64)
+        node, ref = self.top_nodes, 0
+        for g, tris in enumerate(groups):
+            self.node_lo[g], self.ref_lo[g] = node, ref
+            node += 2 * len(tris)
+            ref += len(tris)
+        self.bvh = empty_bvh(node, ref)
+        self.built_cost = np.zeros(n_groups, np.float32)
+        self.cost = np.zeros(n_groups, np.float32)
+        self.first = True
+        self.stats = {}
+        self._moving_idx = np.array([g for g in range(n_groups) if self.moving[g]], np.int64)
+
+    @classmethod
+    def of_objects(cls, n_tris, object_ranges=None, moving_tris=None):
+        """Trees for a scene: object_ranges (start, end) face ranges of the
+        moving objects, one tree each; every other triangle in one static
+        tree. Without object_ranges, moving_tris (None: all) are one tree."""
+        is_moving = np.zeros(n_tris, bool)
+        groups, moving = [], []
+        if object_ranges is not None:
+            for s, e in object_ranges:
+                groups.append(np.arange(s, e, dtype=np.int32))
+                moving.append(True)
+                is_moving[s:e] = True
+        else:
+            ids = np.arange(n_tris, dtype=np.int32) if moving_tris is None else np.asarray(moving_tris, np.int32)
+            groups.append(ids)
+            moving.append(True)
+            is_moving[ids] = True
+        groups.append(np.nonzero(~is_moving)[0].astype(np.int32))
+        moving.append(False)
+        return cls(n_tris, groups, moving)
+
+    def _build(self, tri_verts, g):
+        """Build tree g into its region from this frame's triangle corners."""
+        tris = self.groups[g]
+        m = len(tris)
+        bounds = np.empty((m, 6), np.float32)
+        centroids = np.empty((m, 3), np.float32)
+        prim_bounds(tri_verts, tris, bounds, centroids)
+        order = np.empty(m, np.int32)
+        b = self.bvh
+        n0, r0 = int(self.node_lo[g]), int(self.ref_lo[g])
+        used = build_region(bounds, centroids, MAX_LEAF, n0, b.box, b.child, b.count, order)
+        region = slice(n0, n0 + 2 * m)
+        leaves = b.count[region] > 0
+        b.child[n0:n0 + 2 * m][leaves] += r0
+        b.child[n0 + used:n0 + 2 * m] = -1
+        b.count[n0 + used:n0 + 2 * m] = 0
+        b.tri[r0:r0 + m] = tris[order]
+        b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
+        self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
+
+    def update(self, tri_verts) -> Bvh:
+        """The tree of this frame's triangle corners tri_verts (n, 9)."""
+        t0 = time.perf_counter()
+        n_built = 0
+        if self.first:
+            for g in range(len(self.groups)):
+                self._build(tri_verts, g)
+                n_built += 1
+            self.first = False
+            build_ms = (time.perf_counter() - t0) * 1e3
+            refit_ms = 0.0
+            growth = 1.0
+        else:
+            build_ms = 0.0
+            idx = self._moving_idx
+            if len(idx):
+                b = self.bvh
+                lo = self.node_lo[idx]
+                hi = lo + 2 * np.array([len(self.groups[g]) for g in idx], np.int64)
+                refit_regions(tri_verts, lo, hi, b.box, b.child, b.count, b.tri, b.verts)
+                for g in idx:
+                    self.cost[g] = sah_cost(b.box, b.child, b.count, int(self.node_lo[g]))
+            refit_ms = (time.perf_counter() - t0) * 1e3
+            growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0
+            t1 = time.perf_counter()
+            for g in idx:
+                if self.cost[g] > REBUILD_GROWTH * self.built_cost[g]:
+                    self._build(tri_verts, g)
+                    n_built += 1
+            build_ms = (time.perf_counter() - t1) * 1e3
+        t1 = time.perf_counter()
+        self._top_level()
+        self.stats = {"bvh_build_ms": build_ms, "bvh_refit_ms": refit_ms,
+                      "bvh_top_ms": (time.perf_counter() - t1) * 1e3, "bvh_rebuilt": n_built,
+                      # the largest SAH cost of a refit tree over its cost at its last build
+                      "bvh_sah_growth": growth}
+        return self.bvh
+
+    def _top_level(self):
+        """Nodes 0..2G-1: a binned-SAH tree over the G roots; its leaves are
+        copies of the roots."""
+        b = self.bvh
+        n_groups = len(self.groups)
+        if n_groups == 0:
+            b.box[0, :3] = np.inf
+            b.box[0, 3:] = -np.inf
+            b.child[0], b.count[0] = -1, 0
+            return
+        roots = self.node_lo
+        bounds = np.ascontiguousarray(b.box[roots])
+        centroids = np.where(bounds[:, :3] <= bounds[:, 3:], 0.5 * (bounds[:, :3] + bounds[:, 3:]), 0.0)
+        order = np.empty(n_groups, np.int32)
+        used = build_region(bounds, np.ascontiguousarray(centroids, np.float32), 1, 0, b.box, b.child,
+                            b.count, order)
+        b.child[used:self.top_nodes] = -1
+        b.count[used:self.top_nodes] = 0
+        leaves = np.nonzero(b.count[:used] > 0)[0]
+        src = roots[order[b.child[leaves]]]
+        b.node_i[leaves] = b.node_i[src]          # the whole row, bit for bit

@@ -1,0 +1,255 @@
+"""The per-frame BVH (raycore/bvh_build.py, bvh_trace.py, scene_bvh.py)
+against brute force: every packet mode (rays sharing an origin, rays
+sharing a direction, rays one by one) on adversarial rays, shadow rays
+as the frame makes them, trees refit to moving vertices and rebuilt when
+their cost has grown, and the extreme cases of the grid's tests."""
+import numpy as np
+import pytest
+
+from conftest import icosphere_mesh, soup, tri_verts_of
+from oracles import brute_force_closest
+from raycore.accelerators import BvhAccel, GridAccel
+from raycore.bvh_build import sah_cost
+from raycore.bvh_trace import SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, bvh_trace_rays
+from raycore.camera import camera_basis
+from raycore.grid_build import build_grid
+from raycore.scene_bvh import REBUILD_GROWTH, SceneBvh
+from raycore.shadow_rays import LightRays
+from raycore.trace import surface_of, trace_camera
+
+MODES = {"shared origin": SHARED_ORIGIN, "shared direction": SHARED_DIRECTION, "single": SINGLE}
+
+
+def _scene(rng):
+    v, f = icosphere_mesh(2, 1.0)
+    floor = np.array([[-4, -1.5, -4, 4, -1.5, -4, 4, -1.5, 4], [-4, -1.5, -4, 4, -1.5, 4, -4, -1.5, 4]],
+                     np.float32)
+    return np.ascontiguousarray(np.concatenate([tri_verts_of(v, f), soup(rng, 400, spread=5.0, size=0.3), floor]))
+
+
+def _edge(hit, b1, b2):
+    """Hits within 1e-4 (barycentric) of an edge or corner of their triangle."""
+    with np.errstate(invalid="ignore"):
+        return hit & (np.minimum(np.minimum(b1, b2), 1 - b1 - b2) < 1e-4)
+
+
+def _agree(got, want, tv):
+    """Same hit or miss and distance, but where a ray grazes an edge or
+    corner, by the barycentrics of either hit (rays aimed at the vertices of
+    open triangles: either answer is right to float32 precision)."""
+    t, prim, b1, b2 = got[:4]
+    w_t, w_prim, w_b1, w_b2 = want
+    grazing = _edge(prim >= 0, b1, b2) | _edge(w_prim >= 0, w_b1, w_b2)
+    differ = (prim >= 0) != (w_prim >= 0)
+    assert not np.any(differ & ~grazing), np.nonzero(differ & ~grazing)[0][:10]
+    both = (prim >= 0) & (w_prim >= 0)
+    ok = np.isclose(t[both], w_t[both], rtol=2e-5, atol=1e-6) | grazing[both]
+    assert np.all(ok), np.nonzero(both)[0][~ok][:10]
+
+
+def _adversarial_dirs(rng, tv, origin_of, n=800):
+    """Directions: random; axis-parallel of both signs; with a zero component;
+    through vertices and edge midpoints of random triangles."""
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    d[:100] = 0
+    d[np.arange(100), rng.integers(0, 3, 100)] = rng.choice([-1.0, 1.0], 100)
+    d[100:200, rng.integers(0, 3)] = 0
+    corners = tv[rng.integers(0, len(tv), 200)].reshape(-1, 3, 3)
+    d[200:400] = corners[:, 0] - origin_of(slice(200, 400))
+    d[400:600] = 0.5 * (corners[:, 0] + corners[:, 1]) - origin_of(slice(400, 600))
+    return np.ascontiguousarray(d / np.linalg.norm(d, axis=1, keepdims=True), np.float32)
+
+
+@pytest.mark.parametrize("mode", list(MODES))
+@pytest.mark.parametrize("any_hit", [False, True])
+def test_every_packet_mode_matches_brute_force(rng, mode, any_hit):
+    tv = _scene(rng)
+    bvh = SceneBvh.of_objects(len(tv), [(0, 320)]).update(tv)
+    n = 800
+    if mode == "shared direction":
+        # parallel rays from many origins: one direction, axis-parallel, then a random one
+        for d0 in (np.array([0, -1, 0], np.float32), rng.normal(size=3).astype(np.float32)):
+            d0 /= np.linalg.norm(d0)
+            o = rng.uniform(-3, 3, (n, 3)).astype(np.float32)
+            o[:200] = tv[rng.integers(0, len(tv), 200), :3] - 2 * d0       # aimed at vertices
+            d = np.ascontiguousarray(np.broadcast_to(d0, (n, 3)))
+            _check(bvh, tv, o, d, any_hit, MODES[mode])
+        return
+    if mode == "shared origin":
+        for eye in ((0.2, 0.1, 0.3), (0.0, 6.0, 2.0)):            # inside the sphere, and outside everything
+            o = np.ascontiguousarray(np.broadcast_to(np.array(eye, np.float32), (n, 3)))
+            _check(bvh, tv, o, _adversarial_dirs(rng, tv, lambda s: o[s]), any_hit, MODES[mode])
+        return
+    o = rng.uniform(-2.5, 2.5, (n, 3)).astype(np.float32)
+    _check(bvh, tv, o, _adversarial_dirs(rng, tv, lambda s: o[s]), any_hit, MODES[mode])
+
+
+def _check(bvh, tv, o, d, any_hit, mode):
+    n = len(o)
+    t_min = np.zeros(n, np.float32)
+    t_max = np.full(n, np.inf, np.float32)
+    want = brute_force_closest(o, d, t_min, t_max, tv)
+    got = bvh_trace_rays(bvh, o, d, any_hit=any_hit, mode=mode)
+    if not any_hit:
+        _agree(got, want, tv)
+        return
+    # any hit: hit or miss as brute force, but for grazes
+    edge = _edge(got[1] >= 0, got[2], got[3]) | _edge(want[1] >= 0, want[2], want[3])
+    assert not np.any(((got[1] >= 0) != (want[1] >= 0)) & ~edge)
+    # cut short before the closest hit: brute force and the tree agree
+    short = np.where(want[1] >= 0, want[0] * 0.9, np.inf).astype(np.float32)
+    got = bvh_trace_rays(bvh, o, d, t_max=short, any_hit=True, mode=mode)
+    want = brute_force_closest(o, d, t_min, short, tv)
+    edge = _edge(got[1] >= 0, got[2], got[3]) | _edge(want[1] >= 0, want[2], want[3])
+    assert not np.any(((got[1] >= 0) != (want[1] >= 0)) & ~edge)
+
+
+def test_packets_are_watertight_through_shared_vertices_and_edges():
+    """Rays from one point through every vertex and edge midpoint of a closed
+    sphere from inside: each hits (no ray slips between two triangles)."""
+    v, f = icosphere_mesh(3, 1.0)
+    tv = tri_verts_of(v, f)
+    bvh = SceneBvh.of_objects(len(tv)).update(tv)
+    targets = np.concatenate([v, 0.5 * (v[f[:, 0]] + v[f[:, 1]])]).astype(np.float64)
+    for eye in ((0.0, 0.0, 0.0), (0.1, -0.2, 0.05)):
+        d = targets - np.array(eye)
+        d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+        o = np.ascontiguousarray(np.broadcast_to(np.array(eye, np.float32), d.shape))
+        for mode in (SHARED_ORIGIN, SINGLE):
+            got = bvh_trace_rays(bvh, o, d, mode=mode)
+            assert np.all(got[1] >= 0), (eye, mode, np.sum(got[1] < 0))
+
+
+def _tree_is_consistent(trees, tv):
+    """Every reachable node's box holds its children's boxes or its triangles,
+    a leaf's copied corners are the triangles', every triangle is in one leaf."""
+    b = trees.bvh
+    seen = np.zeros(len(tv), int)
+    stack = [0]
+    while stack:
+        i = stack.pop()
+        if b.count[i] > 0:
+            refs = np.arange(b.child[i], b.child[i] + b.count[i])
+            np.testing.assert_array_equal(b.verts[refs], tv[b.tri[refs]])
+            corners = tv[b.tri[refs]].reshape(-1, 3)
+            assert np.all(corners >= b.box[i, :3]) and np.all(corners <= b.box[i, 3:])
+            seen[b.tri[refs]] += 1
+        elif b.child[i] >= 0:          # inner (count -1 - axis)
+            for c in (b.child[i], b.child[i] + 1):
+                assert np.all(b.box[c, :3] >= b.box[i, :3]) and np.all(b.box[c, 3:] <= b.box[i, 3:])
+                stack.append(c)
+    np.testing.assert_array_equal(seen, 1)
+
+
+def test_refit_follows_deforming_and_rigid_motion(rng):
+    """A deforming sphere, a rigidly moving soup and a static floor: after
+    each refit, the tree is consistent and rays agree with brute force; the
+    static tree's nodes never change."""
+    tv0 = _scene(rng)
+    n_sphere, n_soup = 320, 400
+    trees = SceneBvh.of_objects(len(tv0), [(0, n_sphere), (n_sphere, n_sphere + n_soup)])
+    static_node = int(trees.node_lo[-1])
+    tv = tv0.copy()
+    trees.update(tv)
+    static_box = trees.bvh.box[static_node].copy()
+    o = np.ascontiguousarray(np.broadcast_to(np.array([0.3, 5.0, 4.0], np.float32), (600, 3)))
+    for step in range(1, 4):
+        wobble = (0.1 * np.sin(step + np.arange(n_sphere * 3))).astype(np.float32)
+        tv[:n_sphere] = tv0[:n_sphere] * (1 + np.repeat(wobble.reshape(n_sphere, 3), 3, axis=1))
+        tv[n_sphere:n_sphere + n_soup] = tv0[n_sphere:n_sphere + n_soup] + np.float32(0.4 * step)
+        bvh = trees.update(tv)
+        assert trees.stats["bvh_rebuilt"] == 0
+        _tree_is_consistent(trees, tv)
+        np.testing.assert_array_equal(trees.bvh.box[static_node], static_box)
+        d = _adversarial_dirs(rng, tv, lambda s: o[s], 600)
+        want = brute_force_closest(o, d, np.zeros(600, np.float32), np.full(600, np.inf, np.float32), tv)
+        _agree(bvh_trace_rays(bvh, o, d, mode=SHARED_ORIGIN), want, tv)
+
+
+def test_a_tree_whose_parts_scatter_is_rebuilt(rng):
+    """Triangles that swap places make a refit tree's boxes overlap: its SAH
+    cost grows past REBUILD_GROWTH and the next update rebuilds it, after
+    which its cost is that of a fresh build."""
+    tv0 = np.ascontiguousarray(soup(rng, 2000, spread=4.0, size=0.1))
+    trees = SceneBvh.of_objects(len(tv0))
+    trees.update(tv0)
+    built = float(trees.built_cost[0])
+    tv = np.ascontiguousarray(tv0[rng.permutation(len(tv0))])     # every triangle elsewhere
+    trees.update(tv)
+    assert trees.stats["bvh_rebuilt"] == 1
+    assert trees.stats["bvh_sah_growth"] > REBUILD_GROWTH
+    b = trees.bvh
+    assert abs(float(trees.cost[0]) - sah_cost(b.box, b.child, b.count, int(trees.node_lo[0]))) < 1e-3 * built
+    _tree_is_consistent(trees, tv)
+    # moving by a little keeps the tree
+    trees.update(tv + np.float32(1e-3))
+    assert trees.stats["bvh_rebuilt"] == 0
+
+
+@pytest.mark.parametrize("kind", [0, 1])
+def test_shadow_rays_see_what_the_grid_sees(rng, kind):
+    """The frame's shadow rays (LightRays, light-space order) through the BVH
+    and through the grid: the same visibility, but for rays that graze an
+    occluder's edge within float32 rounding (checked against brute force)."""
+    tv = np.ascontiguousarray(np.concatenate([
+        soup(rng, 1500, spread=3.0, size=0.3),
+        np.array([[-4, -2, -4, 4, -2, -4, 0, -2, 4], [-4, -2, 4, 4, -2, 4, 0, -2, -4]], np.float32)]))
+    grid = build_grid(tv)
+    w = h = 64
+    cam = camera_basis([0.5, 4.0, 7.0], [0, -1, 0], [0, 1, 0], 50, w, h)
+    hits = trace_camera(grid, tv, cam, w, h, 16)
+    surface = surface_of(hits, tv, cam, w, h)
+    light = np.array([2.0, 6.0, 3.0] if kind == 0 else [-0.3, -1.0, -0.2], np.float32)
+    light = light if kind == 0 else light / np.linalg.norm(light)
+    rays = LightRays(surface, kind, light)
+    bvh = BvhAccel(SceneBvh.of_objects(len(tv), [(0, 700)]).update(tv), tv)
+    vis_bvh = np.empty(len(rays.t_max), np.float32)
+    vis_grid = np.empty(len(rays.t_max), np.float32)
+    bvh.trace_shadows(rays, vis_bvh)
+    GridAccel(grid, tv, 16).trace_shadows(rays, vis_grid)
+    assert rays.n_active > 1000 and 0.05 < 1 - vis_bvh[rays.t_max > 0].mean() < 0.95
+    differ = np.nonzero(vis_bvh != vis_grid)[0]
+    assert len(differ) <= 3, len(differ)
+    for i in differ:                     # each is a graze: a hit on an edge or corner
+        o = np.ascontiguousarray(rays.origin[:, i][None])
+        d = np.ascontiguousarray(rays.direction[:, i][None])
+        ref = brute_force_closest(o, d, rays.t_min[i:i + 1], rays.t_max[i:i + 1], tv)
+        mine = bvh.trace_rays(o, d, rays.t_min[i:i + 1], rays.t_max[i:i + 1])
+        assert _edge(ref[1] >= 0, ref[2], ref[3])[0] or _edge(mine.prim >= 0, mine.b1, mine.b2)[0]
+
+
+def test_extreme_geometry(rng):
+    """All triangles in one place, degenerate and sliver triangles, huge and
+    tiny ones, corners that are not finite, and an empty scene."""
+    base = soup(rng, 200, spread=0.01, size=0.005)                      # everything in one spot
+    sliver = np.array([[0, 0, 0, 1, 0, 0, 2, 1e-7, 0]], np.float32)
+    point = np.array([[0.5, 0.5, 0.5] * 3], np.float32)                  # all three corners equal
+    line = np.array([[0, 0, 0, 1, 1, 1, 2, 2, 2]], np.float32)           # collinear
+    huge = np.array([[-1e6, -1, -1e6, 1e6, -1, -1e6, 0, -1, 1e6]], np.float32)
+    nan = np.array([[np.nan, 0, 0, 1, np.inf, 0, 0, 1, 0]], np.float32)
+    tv = np.ascontiguousarray(np.concatenate([base, sliver, point, line, huge, nan]))
+    bvh = SceneBvh.of_objects(len(tv)).update(tv)
+    o = np.ascontiguousarray(np.broadcast_to(np.array([0.003, 2.0, 0.004], np.float32), (500, 3)))
+    d = rng.normal(size=(500, 3)).astype(np.float32)
+    d[:250, 1] = -np.abs(d[:250, 1]) - 3                                  # mostly down at the cluster
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    want = brute_force_closest(o, d, np.zeros(500, np.float32), np.full(500, np.inf, np.float32), tv)
+    for mode in (SHARED_ORIGIN, SINGLE):
+        _agree(bvh_trace_rays(bvh, o, d, mode=mode), want, tv)
+    empty = SceneBvh.of_objects(0).update(np.zeros((0, 9), np.float32))
+    assert np.all(bvh_trace_rays(empty, o, d, mode=SHARED_ORIGIN)[1] == -1)
+
+
+def test_camera_rays_through_the_bvh_equal_the_grids(rng):
+    """Camera packets (8x8 pixels sharing the eye) hit the grid's triangles,
+    with the same distances, from outside and from inside the scene."""
+    tv = _scene(rng)
+    grid = build_grid(tv)
+    bvh = BvhAccel(SceneBvh.of_objects(len(tv), [(0, 320)]).update(tv), tv)
+    w, h = 61, 45                                                        # not a multiple of 8
+    for eye in ((0.0, 0.5, 6.0), (0.2, 0.3, 0.1)):
+        cam = camera_basis(eye, (0.3, 0.0, -0.2), (0, 1, 0), 70.0, w, h)
+        g = trace_camera(grid, tv, cam, w, h, 8)
+        b, (row_off, col_off) = bvh.trace_camera(cam, w, h, (0.5, 0.5))
+        idx = (row_off[:, None] + col_off[None, :]).reshape(-1)
+        _agree((b.t[idx], b.prim[idx], b.b1[idx], b.b2[idx]), (g.t, g.prim, g.b1, g.b2), tv)
