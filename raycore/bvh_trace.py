@@ -127,17 +127,17 @@ def packet_bounds(ray, h_t, n, ia):
 
 
 @helper
-def packet_frustum(ray, h_t, n, mode, planes):
+def packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes):
     """Planes (nx, ny, nz, d) with n . p + d >= 0 at every point of every
     live ray's [t_min, t_max] segment, rows 0..k-1; returns k (0: none, the
     interval test alone). Shared origin L: the packet is a cone from L, and
-    where every direction has one sign on the axis K of ray 0's largest
-    component, its slopes s = d_U / d_K, q = d_V / d_K bound it by four planes
-    through L, and t |d_K| by two planes normal to K. Shared direction l:
-    the origins' extent in a basis (u, v) normal to l bounds the packet by
-    four planes along l, and their least depth along l plus t_min by one."""
+    where every direction has one sign on the packet's shear axis K, its
+    slopes s = d_U / d_K, q = d_V / d_K (the shear rows SU, SV) bound it by
+    four planes through L, and t |d_K| by two planes normal to K. Shared
+    direction l: the origins' extent in a basis (u, v) normal to l bounds
+    the packet by four planes along l, and their least depth along l plus
+    t_min by one."""
     if mode == SHARED_ORIGIN:
-        kx, ky, kz = ray_axes(ray[DX, 0], ray[DY, 0], ray[DZ, 0])
         sign = F1 if ray[DX + kz, 0] > F0 else -F1
         s_lo = INF
         s_hi = -INF
@@ -151,8 +151,8 @@ def packet_frustum(ray, h_t, n, mode, planes):
             dk = ray[DX + kz, r] * sign
             if not dk > F0:
                 return 0
-            s = ray[DX + kx, r] / dk
-            q = ray[DX + ky, r] / dk
+            s = ray[SU, r] * sign
+            q = ray[SV, r] * sign
             s_lo = min(s_lo, s)
             s_hi = max(s_hi, s)
             q_lo = min(q_lo, q)
@@ -179,6 +179,8 @@ def packet_frustum(ray, h_t, n, mode, planes):
         planes[4, 3] -= w_lo
         planes[5, 3] += w_hi if np.isfinite(w_hi) else F0
         return 6 if np.isfinite(w_hi) else 5
+    if mode != SHARED_DIRECTION:
+        return 0
     # shared direction l: a basis (u, v) normal to it
     lx, ly, lz = ray[DX, 0], ray[DY, 0], ray[DZ, 0]
     if abs(lx) < np.float32(0.6):
@@ -293,29 +295,28 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, s
     alone. Returns False, tracing nothing, when the rays have no common
     shear axis (trace them one by one)."""
     box, node_i, tri, verts = bvh
-    live = packet_bounds(ray, h_t, n, ia)
+    live, kx, ky, kz, sgn_x, sgn_y, sgn_z = packet_axes(ray, h_t, n)
     if live == 0:
         return True
-    n_planes = packet_frustum(ray, h_t, n, mode, planes)
-    # the packet's direction sign per axis orders the children
-    sx_ = F0
-    sy_ = F0
-    sz_ = F0
-    for r in range(n):
-        sx_ += ray[DX, r]
-        sy_ += ray[DY, r]
-        sz_ += ray[DZ, r]
-    sgn = (sx_ >= F0, sy_ >= F0, sz_ >= F0)
-    kx, ky, kz = packet_axes(ray, h_t, n)
     if kz < 0:
         return False
-    # the rays in the frame of the Woop test, one axis permutation for the packet
+    sgn = (sgn_x, sgn_y, sgn_z)
+    # the rays in the frame of the Woop test: origin permuted, own shear
+    row_u = OX + kx
+    row_v = OX + ky
+    row_k = OX + kz
     for r in range(n):
-        o = (ray[OX, r], ray[OY, r], ray[OZ, r])
-        d = (ray[DX, r], ray[DY, r], ray[DZ, r])
-        ray[PU, r], ray[PV, r], ray[PK, r] = o[kx], o[ky], o[kz]
-        inv = F1 / d[kz] if d[kz] != F0 else F0
-        ray[SU, r], ray[SV, r], ray[SZ, r] = d[kx] * inv, d[ky] * inv, inv
+        ray[PU, r] = ray[row_u, r]
+        ray[PV, r] = ray[row_v, r]
+        ray[PK, r] = ray[row_k, r]
+    for r in range(n):
+        inv = F1 / ray[DX + kz, r]
+        ray[SU, r] = ray[DX + kx, r] * inv
+        ray[SV, r] = ray[DX + ky, r] * inv
+        ray[SZ, r] = inv
+    n_planes = packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes)
+    if n_planes == 0:
+        packet_bounds(ray, h_t, n, ia)
     n_visits = 0
     n_tests = 0
     n_leaves = 0
@@ -351,19 +352,22 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, s
             ax, ay, az = v[kx], v[ky], v[kz]
             bx, by, bz = v[3 + kx], v[3 + ky], v[3 + kz]
             cx, cy, cz = v[6 + kx], v[6 + ky], v[6 + kz]
-            hits = 0
+            # an or-reduction, not a count: an int64 count halves the vector width
+            some = False
             for r in range(n):
                 ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
                 hit, t, b1, b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
                                            cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
                 hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
-                hits += 1 if hit else 0
+                some = some | hit
                 h_t[r] = (-INF if any_hit else t) if hit else h_t[r]
                 h_b1[r] = b1 if hit else h_b1[r]
                 h_b2[r] = b2 if hit else h_b2[r]
                 prim[r] = k if hit else prim[r]
-            if any_hit and hits > 0:
-                live -= hits
+            if any_hit and some:
+                live = 0
+                for r in range(n):
+                    live += 1 if h_t[r] >= ray[TMIN, r] else 0
         if any_hit and live <= 0:
             break
     counters[row, PACKETS] += 1
@@ -375,25 +379,40 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, s
 
 @helper
 def packet_axes(ray, h_t, n):
-    """(kx, ky, kz): the Woop test's axis permutation for the whole packet:
-    kz the axis on which the smallest share of a live ray's direction is
-    largest (the major axis of a coherent packet), where every live ray
-    keeps at least MIN_SHEAR_SHARE of its largest component (the test stays
-    as accurate as with the ray's own largest: a small one makes the shear
-    and the distance to a triangle that is all but degenerate noise).
-    kz = -1 when no axis qualifies: trace the rays one by one."""
-    best = -F1
+    """(live, kx, ky, kz, sx, sy, sz): how many rays are live; the Woop
+    test's axis permutation for the whole packet; whether the packet's
+    summed direction is >= 0 on each axis (the nearer child first). kz is
+    the axis of the summed direction's largest component, or the next,
+    where every live ray keeps at least MIN_SHEAR_SHARE of its own largest
+    component (the test stays as accurate as with the ray's own largest: a
+    small one makes the shear, and the distance to a triangle that is all
+    but degenerate, noise); kz = -1 when no axis qualifies (trace the rays
+    one by one)."""
+    live = 0
+    sum_x = F0
+    sum_y = F0
+    sum_z = F0
+    for r in range(n):
+        ok = h_t[r] >= ray[TMIN, r]
+        live += 1 if ok else 0
+        sum_x += ray[DX, r] if ok else F0
+        sum_y += ray[DY, r] if ok else F0
+        sum_z += ray[DZ, r] if ok else F0
+    big = (abs(sum_x), abs(sum_y), abs(sum_z))
+    first = 0 if big[0] >= big[1] and big[0] >= big[2] else (1 if big[1] >= big[2] else 2)
     kz = -1
-    for a in range(3):
-        least = INF
+    for step in range(3):
+        a = (first + step) % 3
+        fits = True
         for r in range(n):
-            if h_t[r] >= ray[TMIN, r]:
-                big = max(abs(ray[DX, r]), max(abs(ray[DY, r]), abs(ray[DZ, r])))
-                least = min(least, abs(ray[DX + a, r]) / big if big > F0 else F0)
-        if least >= MIN_SHEAR_SHARE and least > best:
-            best = least
+            dx, dy, dz = abs(ray[DX, r]), abs(ray[DY, r]), abs(ray[DZ, r])
+            d_a = dx if a == 0 else (dy if a == 1 else dz)
+            bad = (d_a < MIN_SHEAR_SHARE * max(dx, max(dy, dz))) & (h_t[r] >= ray[TMIN, r])
+            fits = fits & (not bad)
+        if fits:
             kz = a
-    return (kz + 1) % 3, (kz + 2) % 3, kz
+            break
+    return live, (kz + 1) % 3, (kz + 2) % 3, kz, sum_x >= F0, sum_y >= F0, sum_z >= F0
 
 
 @kernel

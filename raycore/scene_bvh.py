@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit_regions, sah_cost
+from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit, sah_cost
 
 # a refit tree is rebuilt when its SAH cost exceeds this many times its cost
 # at the last build (README: measured on the runner and hand, where refit
@@ -54,6 +54,7 @@ class SceneBvh:
         self.first = True
         self.stats = {}
         self._moving_idx = np.array([g for g in range(n_groups) if self.moving[g]], np.int64)
+        self.used = np.zeros(n_groups, np.int64)     # nodes each tree's build used
 
     @classmethod
     def of_objects(cls, n_tris, object_ranges=None, moving_tris=None):
@@ -95,6 +96,7 @@ class SceneBvh:
         b.tri[r0:r0 + m] = tris[order]
         b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
         self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
+        self.used[g] = used
 
     def update(self, tri_verts) -> Bvh:
         """The tree of this frame's triangle corners tri_verts (n, 9)."""
@@ -114,10 +116,9 @@ class SceneBvh:
             if len(idx):
                 b = self.bvh
                 lo = self.node_lo[idx]
-                hi = lo + 2 * np.array([len(self.groups[g]) for g in idx], np.int64)
-                refit_regions(tri_verts, lo, hi, b.box, b.child, b.count, b.tri, b.verts)
-                for g in idx:
-                    self.cost[g] = sah_cost(b.box, b.child, b.count, int(self.node_lo[g]))
+                cost = np.empty(len(idx), np.float32)
+                refit(tri_verts, lo, lo + self.used[idx], b.node, b.node_i, b.tri, b.verts, cost)
+                self.cost[idx] = cost
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0
             t1 = time.perf_counter()
