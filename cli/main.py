@@ -223,8 +223,8 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
         n_threads = 0                      # each worker: all of its machine's cores
     width, height = res if res else (None, None)
     if packet and (accel or spec.render.accel) in ("kdtree", "bvh"):
-        click.echo(f"frustrace: warning: --packet is for the grid; the {accel or spec.render.accel} "
-                   f"traces 8x8 packets", err=True)
+        name = {"kdtree": "kd-tree", "bvh": "BVH"}[accel or spec.render.accel]
+        click.echo(f"frustrace: warning: --packet is for the grid; the {name} traces 8x8 packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
                     width=width, height=height)

@@ -253,3 +253,37 @@ def test_camera_rays_through_the_bvh_equal_the_grids(rng):
         b, (row_off, col_off) = bvh.trace_camera(cam, w, h, (0.5, 0.5))
         idx = (row_off[:, None] + col_off[None, :]).reshape(-1)
         _agree((b.t[idx], b.prim[idx], b.b1[idx], b.b2[idx]), (g.t, g.prim, g.b1, g.b2), tv)
+
+
+def test_render_with_the_bvh_records_what_it_did(tmp_path):
+    """`render --accel bvh --packet 32`: a warning that the BVH traces 8x8
+    packets, stats.json with the structures and the BVH's refit per frame."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.main import main
+    from test_scene import scene_with
+    path = scene_with(tmp_path, "  - {name: ball, mesh: ball.obj}\n")
+    res = CliRunner().invoke(main, ["render", str(path), "-o", str(tmp_path / "out"), "--accel", "bvh",
+                                    "--packet", "32", "--frames", "0:1", "-q"])
+    assert res.exit_code == 0 and "BVH traces 8x8" in res.stderr, res.output
+    stats = json.loads((tmp_path / "out" / "stats.json").read_text())
+    run = stats["runs"][-1]
+    assert (run["accel"], run["shadow_accel"], run["packet"]) == ("bvh", "bvh", 8)
+    assert all("bvh_refit_ms" in f and "grid_dims" not in f for f in stats["frames"])
+
+
+def test_compare_takes_all_three_structures(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.main import main
+    out = tmp_path / "c.json"
+    res = CliRunner().invoke(main, ["compare", "grid", "vs", "kdtree", "vs", "bvh", "--scene", "demo",
+                                    "--res", "48", "--frames", "1", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    result = json.loads(out.read_text())
+    assert [r["structure"] for r in result["rows"]] == ["grid", "kdtree", "bvh"]
+    assert all(d["hit_mismatch_pixels"] == 0 for d in result["diff"])

@@ -7,8 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from raycore.config import RenderConfig
+from raycore.accelerators import BvhAccel
+from raycore.config import SHADOW_ACCEL, RenderConfig
 from raycore.frame import KD_PACKET
+
+BVH_PACKET = BvhAccel.packet
 
 
 def write_stats(path: Path, scene, cfg, rows, run, file_of, frames) -> dict:
@@ -64,10 +67,10 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             "tri_tests": float(result.counters["tri_tests"]),
             "shadow_rays": result.counters["shadow_rays"],
             "shadow_rays_left_out": result.counters["shadow_rays_skipped"],   # facing away, dark, outside a penumbra
-            "cells_visited": result.counters["cells"],   # kd-tree: nodes visited
+            "cells_visited": result.counters["cells"],   # kd-tree and BVH: nodes visited
             "fallback_rays": result.counters["fallback_rays"],
-            **({"grid_dims": result.counters["grid_dims"]} if "grid_dims" in result.counters
-               else {"kd_nodes": result.counters["kd_nodes"]}),
+            # the structures this frame built: grid cells, kd-tree nodes, BVH refit and rebuilds
+            **{k: result.counters[k] for k in STRUCTURE_KEYS if k in result.counters},
             # under an error budget: camera rays not spent against spp (the cap) everywhere
             **({"rays_left_out": result.counters["rays_left_out"],
                 "spp_mean": result.counters["adaptive_spp_mean"]} if "rays_left_out" in result.counters else {}),
@@ -86,10 +89,15 @@ def frame_metadata(row: dict, version: str) -> dict:
     return meta
 
 
+STRUCTURE_KEYS = ("grid_dims", "kd_nodes", "bvh_build_ms", "bvh_refit_ms", "bvh_top_ms", "bvh_rebuilt",
+                  "bvh_sah_growth")
+
+
 def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
-    size the accelerator really used (the kd-tree's is always KD_PACKET)."""
-    return {"accel": cfg.accel, "packet": KD_PACKET if cfg.accel == "kdtree" else cfg.packet,
+    size the accelerator really used (the kd-tree's and the BVH's are 8x8)."""
+    return {"accel": cfg.accel, "shadow_accel": cfg.shadow_accel or SHADOW_ACCEL,
+            "packet": {"kdtree": KD_PACKET, "bvh": BVH_PACKET}.get(cfg.accel, cfg.packet),
             "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
             **({"max_error": cfg.max_error} if cfg.max_error > 0 else {})}
 
