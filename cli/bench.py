@@ -15,7 +15,8 @@ def plot_phases(rows, path: Path):
     for i, r in enumerate(rows):                 # a gap of one bar between scenes
         x.append(i + scenes.index(r["scene"]))
         group_x.setdefault(r["scene"], []).append(x[-1])
-    labels = [r["accel"] + ("" if r.get("peer") else f" {r['packet']}") for r in rows]
+    labels = [r["accel"] + ("" if r.get("peer") else f" {r['packet']}"
+                            + (f" /{r['shadow_accel']}" if r.get("shadow_accel") else "")) for r in rows]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.42 * (x[-1] + 1) + 1.5) if rows else 6.0, 5.0))
     bottom = [0.0] * len(rows)
     for phase in PHASES:
