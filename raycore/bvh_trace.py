@@ -127,7 +127,7 @@ def packet_bounds(ray, h_t, n, ia):
 
 
 @helper
-def packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes):
+def packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes):
     """Planes (nx, ny, nz, d) with n . p + d >= 0 at every point of every
     live ray's [t_min, t_max] segment, rows 0..k-1; returns k (0: none, the
     interval test alone). Shared origin L: the packet is a cone from L, and
@@ -136,7 +136,10 @@ def packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes):
     four planes through L, and t |d_K| by two planes normal to K. Shared
     direction l: the origins' extent in a basis (u, v) normal to l bounds
     the packet by four planes along l, and their least depth along l plus
-    t_min by one."""
+    t_min by one. Column 4: how far behind a plane a box must lie to be
+    culled, EPS_PLANE of the magnitudes in its test (big: the largest
+    |coordinate| of any box), so that rounding never culls a box a ray
+    reaches."""
     if mode == SHARED_ORIGIN:
         sign = F1 if ray[DX + kz, 0] > F0 else -F1
         s_lo = INF
@@ -178,7 +181,9 @@ def packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes):
             planes[j, 3] = -(planes[j, 0] * lx + planes[j, 1] * ly + planes[j, 2] * lz)
         planes[4, 3] -= w_lo
         planes[5, 3] += w_hi if np.isfinite(w_hi) else F0
-        return 6 if np.isfinite(w_hi) else 5
+        k = 6 if np.isfinite(w_hi) else 5
+        _plane_margins(planes, k, big)
+        return k
     if mode != SHARED_DIRECTION:
         return 0
     # shared direction l: a basis (u, v) normal to it
@@ -210,15 +215,23 @@ def packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes):
     planes[2, 0], planes[2, 1], planes[2, 2], planes[2, 3] = vx, vy, vz, -v_lo
     planes[3, 0], planes[3, 1], planes[3, 2], planes[3, 3] = -vx, -vy, -vz, v_hi
     planes[4, 0], planes[4, 1], planes[4, 2], planes[4, 3] = lx, ly, lz, -w_lo
+    _plane_margins(planes, 5, big)
     return 5
+
+
+@helper
+def _plane_margins(planes, k, big):
+    """planes[j, 4]: the culling margin of plane j (see packet_frustum)."""
+    for j in range(k):
+        norm1 = abs(planes[j, 0]) + abs(planes[j, 1]) + abs(planes[j, 2])
+        planes[j, 4] = EPS_PLANE * (np.float32(2.0) * norm1 * big + abs(planes[j, 3]))
 
 
 @helper
 def _frustum_misses(box, i, planes, n_planes):
     """True when box i lies wholly outside one of the packet's planes: its
-    farthest corner along the plane's normal is behind it, by more than
-    EPS_PLANE of the magnitudes involved (rounding never culls a box a
-    ray reaches)."""
+    farthest corner along the plane's normal is behind it by more than the
+    plane's margin (planes[j, 4])."""
     cx = np.float32(0.5) * (box[i, 0] + box[i, 3])
     cy = np.float32(0.5) * (box[i, 1] + box[i, 4])
     cz = np.float32(0.5) * (box[i, 2] + box[i, 5])
@@ -229,8 +242,7 @@ def _frustum_misses(box, i, planes, n_planes):
         nx, ny, nz, d = planes[j, 0], planes[j, 1], planes[j, 2], planes[j, 3]
         centre = nx * cx + ny * cy + nz * cz + d
         reach = abs(nx) * ex + abs(ny) * ey + abs(nz) * ez
-        size = abs(nx * cx) + abs(ny * cy) + abs(nz * cz) + abs(d) + reach
-        if centre + reach < -EPS_PLANE * size:
+        if centre + reach < -planes[j, 4]:
             return True
     return False
 
@@ -285,15 +297,17 @@ def _any_ray_hits_box(ray, h_t, n, box, i):
 
 
 @kernel
-def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, stack, counters, row):
+def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
+                row):
     """Closest (or any) hits of packet rays 0..n-1 in `bvh`: on entry
     h_t holds each ray's t_max (-inf: no ray) and prim -1; on return
     prim >= 0 marks a hit (a reference), with t in h_t (closest hit; any
     hit: -inf) and barycentrics in h_b1, h_b2. mode SHARED_ORIGIN: every ray
     starts at ray[O*, 0], SHARED_DIRECTION: every ray runs along ray[D*, 0]
     (either gives the packet a frustum); anything else: interval arithmetic
-    alone. Returns False, tracing nothing, when the rays have no common
-    shear axis (trace them one by one)."""
+    alone. vis_only (any hit, visibility alone): a hit only sets h_t to -inf
+    (prim and barycentrics untouched). Returns False, tracing nothing, when
+    the rays have no common shear axis (trace them one by one)."""
     box, node_i, tri, verts = bvh
     live, kx, ky, kz, sgn_x, sgn_y, sgn_z = packet_axes(ray, h_t, n)
     if live == 0:
@@ -314,7 +328,11 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, s
         ray[SU, r] = ray[DX + kx, r] * inv
         ray[SV, r] = ray[DX + ky, r] * inv
         ray[SZ, r] = inv
-    n_planes = packet_frustum(ray, h_t, n, mode, kx, ky, kz, planes)
+    # the largest |coordinate| of the tree's root box bounds the rounding of every plane test
+    big = F0
+    for q in range(6):
+        big = max(big, abs(box[0, q]))
+    n_planes = packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes)
     if n_planes == 0:
         packet_bounds(ray, h_t, n, ia)
     n_visits = 0
@@ -354,16 +372,26 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, s
             cx, cy, cz = v[6 + kx], v[6 + ky], v[6 + kz]
             # an or-reduction, not a count: an int64 count halves the vector width
             some = False
-            for r in range(n):
-                ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
-                hit, t, b1, b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
-                                           cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
-                hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
-                some = some | hit
-                h_t[r] = (-INF if any_hit else t) if hit else h_t[r]
-                h_b1[r] = b1 if hit else h_b1[r]
-                h_b2[r] = b2 if hit else h_b2[r]
-                prim[r] = k if hit else prim[r]
+            if vis_only:
+                # shadow rays: only whether something is hit (one store, not four)
+                for r in range(n):
+                    ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
+                    hit, t, _b1, _b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
+                                                 cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
+                    hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
+                    some = some | hit
+                    h_t[r] = -INF if hit else h_t[r]
+            else:
+                for r in range(n):
+                    ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
+                    hit, t, b1, b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
+                                               cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
+                    hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
+                    some = some | hit
+                    h_t[r] = (-INF if any_hit else t) if hit else h_t[r]
+                    h_b1[r] = b1 if hit else h_b1[r]
+                    h_b2[r] = b2 if hit else h_b2[r]
+                    prim[r] = k if hit else prim[r]
             if any_hit and some:
                 live = 0
                 for r in range(n):
@@ -473,19 +501,21 @@ def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, coun
 
 
 @helper
-def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, stack, counters, row):
+def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
+                  row):
     """Packet rays 0..n-1 as walk_packet, or one by one when they have no
     common shear axis (or mode is SINGLE)."""
     if mode != SINGLE:
         set_inverse(ray, n)
-        if walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, stack, counters, row):
+        if walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
+                       counters, row):
             return
     for r in range(n):
         if not h_t[r] >= ray[TMIN, r]:
             continue
         t, k, b1, b2 = trace_single(bvh, ray[OX, r], ray[OY, r], ray[OZ, r], ray[DX, r], ray[DY, r],
                                     ray[DZ, r], ray[TMIN, r], h_t[r], any_hit, stack, counters, row)
-        h_t[r], prim[r], h_b1[r], h_b2[r] = t, k, b1, b2
+        h_t[r], prim[r], h_b1[r], h_b2[r] = (-INF if (vis_only and k >= 0) else t), k, b1, b2
         counters[row, FALLBACK_RAYS] += 1
     counters[row, PACKETS] += 1
 
@@ -494,7 +524,7 @@ def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes,
 def _scratch():
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty((6, 3), np.float32),
-            np.empty((6, 4), np.float32), np.empty(STACK * 2, np.int64))
+            np.empty((6, 5), np.float32), np.empty(STACK * 2, np.int64))
 
 
 @parallel_kernel
@@ -509,6 +539,7 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
     queue = new_queue()
     want_hits = out_t.shape[0] > 0
     want_vis = vis.shape[0] > 0
+    vis_only = any_hit and want_vis and not want_hits
     for _w in prange(n_workers):
         ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
         while True:
@@ -517,21 +548,26 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
                 break
             base = p * PACKET
             n = min(PACKET, n_active - base)
+            i0 = order[base]
+            shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
             for r in range(n):
                 i = order[base + r]
-                ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, i], origin[1, i], origin[2, i]
+                j = i0 if shared else i
+                ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
                 ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
                 ray[TMIN, r] = t_min[i]
                 h_t[r] = t_max[i]
                 h_b1[r] = F0
                 h_b2[r] = F0
                 prim[r] = -1
-            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, mode, ia, planes, stack, counters, p)
+            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
+                          counters, p)
             for r in range(n):
                 i = order[base + r]
                 k = prim[r]
                 if want_vis:
-                    vis[i] = F0 if k >= 0 else F1
+                    # loaded rays are live (t_max >= t_min): -inf means occluded
+                    vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
                 if want_hits:
                     out_prim[i] = bvh.tri[k] if k >= 0 else -1
                     out_t[i] = h_t[r] if k >= 0 else INF
@@ -570,7 +606,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, n_workers, out_t, out_prim
                     h_b2[n] = F0
                     prim[n] = -1
                     n += 1
-            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, SHARED_ORIGIN, ia, planes, stack,
+            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
                           counters, p)
             n = 0
             for yy in range(side):
