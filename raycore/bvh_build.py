@@ -32,7 +32,7 @@ import numpy as np
 
 from numba import prange
 
-from ._jit import kernel, parallel_kernel
+from ._jit import helper, kernel, parallel_kernel
 
 N_BINS = 16
 # SAH constants: a node visit costs about as much as one ray/triangle test
@@ -100,6 +100,13 @@ def _area(x0, y0, z0, x1, y1, z1):
     dy = max(y1 - y0, np.float32(0.0))
     dz = max(z1 - z0, np.float32(0.0))
     return dx * dy + dy * dz + dz * dx
+
+
+@helper
+def _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1):
+    """The box (x0..z1) grown by bin b of axis a (the SAH sweeps)."""
+    return (min(x0, bin_box[a, b, 0]), min(y0, bin_box[a, b, 1]), min(z0, bin_box[a, b, 2]),
+            max(x1, bin_box[a, b, 3]), max(y1, bin_box[a, b, 4]), max(z1, bin_box[a, b, 5]))
 
 
 @kernel
@@ -178,12 +185,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                 cnt = 0
                 for b in range(N_BINS - 1, 0, -1):
                     cnt += bin_n[a, b]
-                    x0 = min(x0, bin_box[a, b, 0])
-                    y0 = min(y0, bin_box[a, b, 1])
-                    z0 = min(z0, bin_box[a, b, 2])
-                    x1 = max(x1, bin_box[a, b, 3])
-                    y1 = max(y1, bin_box[a, b, 4])
-                    z1 = max(z1, bin_box[a, b, 5])
+                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
                     r_n[b] = cnt
                     r_area[b] = _area(x0, y0, z0, x1, y1, z1) if cnt > 0 else np.float32(0.0)
                 x0 = y0 = z0 = np.float32(np.inf)
@@ -191,12 +193,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                 cnt = 0
                 for b in range(N_BINS - 1):
                     cnt += bin_n[a, b]
-                    x0 = min(x0, bin_box[a, b, 0])
-                    y0 = min(y0, bin_box[a, b, 1])
-                    z0 = min(z0, bin_box[a, b, 2])
-                    x1 = max(x1, bin_box[a, b, 3])
-                    y1 = max(y1, bin_box[a, b, 4])
-                    z1 = max(z1, bin_box[a, b, 5])
+                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
                     if cnt == 0 or r_n[b + 1] == 0:
                         continue
                     cost = (_area(x0, y0, z0, x1, y1, z1) * np.float32(cnt)

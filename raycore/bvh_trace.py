@@ -296,6 +296,14 @@ def _any_ray_hits_box(ray, h_t, n, box, i):
     return hit
 
 
+@helper
+def _push_children(stack, top, left, left_first):
+    """Push the children of a node, the one to visit first on top; the new top."""
+    stack[top] = left + 1 if left_first else left
+    stack[top + 1] = left if left_first else left + 1
+    return top + 2
+
+
 @kernel
 def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
                 row):
@@ -354,10 +362,7 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
             left = node_i[i, CHILD]
             if left < 0:
                 continue
-            near = left if sgn[-1 - c] else left + 1
-            stack[top] = 2 * left + 1 - near
-            stack[top + 1] = near
-            top += 2
+            top = _push_children(stack, top, left, sgn[-1 - c])
             continue
         n_leaves += 1
         ref0 = node_i[i, CHILD]
@@ -476,13 +481,7 @@ def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, coun
             left = node_i[i, CHILD]
             if left < 0:
                 continue
-            if d[-1 - c] >= F0:
-                stack[top] = left + 1
-                stack[top + 1] = left
-            else:
-                stack[top] = left
-                stack[top + 1] = left + 1
-            top += 2
+            top = _push_children(stack, top, left, d[-1 - c] >= F0)
             continue
         counters[row, CANDIDATES] += 1
         first = node_i[i, CHILD]
