@@ -115,7 +115,10 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
     node region starting at node0 (root there, children in pairs after it).
     `order` (m,) receives the primitives in leaf order: leaf k's references
     are order[child[k] - ref0 ...] for the caller's ref0 (the caller adds
-    its reference base to child of every leaf). Returns the nodes used."""
+    its reference base to child of every leaf). Returns the nodes used.
+    bounds and centroids are reordered with `order` as the build partitions
+    them, so that every pass reads them in memory order (through `order`,
+    the reads scatter once the first splits have shuffled it)."""
     m = bounds.shape[0]
     for i in range(m):
         order[i] = i
@@ -140,7 +143,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         c_lo0 = c_lo1 = c_lo2 = np.float32(np.inf)
         c_hi0 = c_hi1 = c_hi2 = np.float32(-np.inf)
         for k in range(s, e):
-            p = order[k]
+            p = k
             lo0 = min(lo0, bounds[p, 0])
             lo1 = min(lo1, bounds[p, 1])
             lo2 = min(lo2, bounds[p, 2])
@@ -169,7 +172,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                     bin_box[a, b, 0] = bin_box[a, b, 1] = bin_box[a, b, 2] = np.float32(np.inf)
                     bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
             for k in range(s, e):
-                p = order[k]
+                p = k
                 for a in range(3):
                     b = min(int((centroids[p, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                     bin_n[a, b] += 1
@@ -214,11 +217,15 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
             a = best_axis
             i, j = s, e - 1
             while i <= j:
-                b = min(int((centroids[order[i], a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                b = min(int((centroids[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                 if b <= best_bin:
                     i += 1
                 else:
                     order[i], order[j] = order[j], order[i]
+                    for q in range(6):
+                        bounds[i, q], bounds[j, q] = bounds[j, q], bounds[i, q]
+                    for q in range(3):
+                        centroids[i, q], centroids[j, q] = centroids[j, q], centroids[i, q]
                     j -= 1
             mid = i
             split_axis = a

@@ -76,7 +76,7 @@ def _inv(d):
     return F1 / d if d != F0 else BIG
 
 
-@helper
+@kernel
 def set_inverse(ray, n):
     """Inverse directions of rays 0..n-1 (BIG for a zero component)."""
     for r in range(n):
@@ -85,7 +85,7 @@ def set_inverse(ray, n):
         ray[IZ, r] = _inv(ray[DZ, r])
 
 
-@helper
+@kernel
 def packet_bounds(ray, h_t, n, ia):
     """Interval-arithmetic bounds of the live rays: ia[0, a] / ia[1, a]
     origin range on axis a, ia[2, a] / ia[3, a] inverse-direction range,
@@ -126,7 +126,7 @@ def packet_bounds(ray, h_t, n, ia):
     return live
 
 
-@helper
+@kernel
 def packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes):
     """Planes (nx, ny, nz, d) with n . p + d >= 0 at every point of every
     live ray's [t_min, t_max] segment, rows 0..k-1; returns k (0: none, the
@@ -219,7 +219,7 @@ def packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes):
     return 5
 
 
-@helper
+@kernel
 def _plane_margins(planes, k, big):
     """planes[j, 4]: the culling margin of plane j (see packet_frustum)."""
     for j in range(k):
@@ -410,7 +410,7 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     return True
 
 
-@helper
+@kernel
 def packet_axes(ray, h_t, n):
     """(live, kx, ky, kz, sx, sy, sz): how many rays are live; the Woop
     test's axis permutation for the whole packet; whether the packet's
@@ -526,6 +526,47 @@ def _scratch():
             np.empty((6, 5), np.float32), np.empty(STACK * 2, np.int64))
 
 
+@kernel
+def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, vis_only, mode, queue,
+                  n_packets, want_hits, want_vis, out_t, out_prim, out_b1, out_b2, vis, counters):
+    """One thread's share of trace_batch: packets pulled from `queue` until
+    none are left. A plain function, called once per thread: the parallel
+    region stays a call, which compiles in half the time of the whole loop
+    inside it (numba analyses a prange body's every statement)."""
+    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+    while True:
+        p = next_tile(queue, n_packets)
+        if p < 0:
+            break
+        base = p * PACKET
+        n = min(PACKET, n_active - base)
+        i0 = order[base]
+        shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
+        for r in range(n):
+            i = order[base + r]
+            j = i0 if shared else i
+            ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
+            ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
+            ray[TMIN, r] = t_min[i]
+            h_t[r] = t_max[i]
+            h_b1[r] = F0
+            h_b2[r] = F0
+            prim[r] = -1
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
+                      counters, p)
+        for r in range(n):
+            i = order[base + r]
+            k = prim[r]
+            if want_vis:
+                # loaded rays are live (t_max >= t_min): -inf means occluded
+                vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
+            if want_hits:
+                out_prim[i] = bvh.tri[k] if k >= 0 else -1
+                out_t[i] = h_t[r] if k >= 0 else INF
+                out_b1[i] = h_b1[r]
+                out_b2[i] = h_b2[r]
+
+
 @parallel_kernel
 def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, n_workers,
                 out_t, out_prim, out_b1, out_b2, vis, counters):
@@ -540,38 +581,8 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
     want_vis = vis.shape[0] > 0
     vis_only = any_hit and want_vis and not want_hits
     for _w in prange(n_workers):
-        ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
-        while True:
-            p = next_tile(queue, n_packets)
-            if p < 0:
-                break
-            base = p * PACKET
-            n = min(PACKET, n_active - base)
-            i0 = order[base]
-            shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
-            for r in range(n):
-                i = order[base + r]
-                j = i0 if shared else i
-                ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
-                ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
-                ray[TMIN, r] = t_min[i]
-                h_t[r] = t_max[i]
-                h_b1[r] = F0
-                h_b2[r] = F0
-                prim[r] = -1
-            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
-                          counters, p)
-            for r in range(n):
-                i = order[base + r]
-                k = prim[r]
-                if want_vis:
-                    # loaded rays are live (t_max >= t_min): -inf means occluded
-                    vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
-                if want_hits:
-                    out_prim[i] = bvh.tri[k] if k >= 0 else -1
-                    out_t[i] = h_t[r] if k >= 0 else INF
-                    out_b1[i] = h_b1[r]
-                    out_b2[i] = h_b2[r]
+        _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, vis_only, mode, queue,
+                      n_packets, want_hits, want_vis, out_t, out_prim, out_b1, out_b2, vis, counters)
 
 
 @parallel_kernel
