@@ -2,11 +2,13 @@
 Deformable Scenes using Dynamic Bounding Volume Hierarchies").
 
 A packet of up to PACKET rays walks the tree together, nearer child first
-(by the packet's direction sign on the node's split axis), with a stack.
-A node is skipped when
-  1. interval arithmetic over the packet (its origins' and inverse
-     directions' ranges on every axis where all directions share a sign)
-     proves that no ray can enter its box: a few scalar operations, and
+(by the packet's summed direction's sign on the node's split axis), with a
+stack. A node is skipped when
+  1. its box lies outside one plane of the packet's frustum (packet_frustum:
+     a cone through a shared origin, a prism along a shared direction) or,
+     for other packets, interval arithmetic over the rays' origins and
+     inverse directions proves no ray can enter it: a few scalar
+     operations, and
   2. otherwise when no live ray's slab test hits it: one branch-free loop
      over the packet that LLVM vectorizes.
 A leaf's triangles are tested against every ray of the packet in one

@@ -287,3 +287,20 @@ def test_compare_takes_all_three_structures(tmp_path):
     result = json.loads(out.read_text())
     assert [r["structure"] for r in result["rows"]] == ["grid", "kdtree", "bvh"]
     assert all(d["hit_mismatch_pixels"] == 0 for d in result["diff"])
+
+
+def test_the_scene_file_names_the_shadow_structure(tmp_path):
+    """render.shadow_accel in the scene file reaches the frame (stats.json
+    records it), and `--shadow-accel` overrides it."""
+    import json
+
+    from click.testing import CliRunner
+
+    from cli.main import main
+    from test_scene import scene_with
+    path = scene_with(tmp_path, "  - {name: ball, mesh: ball.obj}\n", extra="render: {shadow_accel: grid}")
+    for args, want in (([], "grid"), (["--shadow-accel", "kdtree"], "kdtree")):
+        out = tmp_path / f"out_{want}"
+        res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "--frames", "0:0", "-q", *args])
+        assert res.exit_code == 0, res.output
+        assert json.loads((out / "stats.json").read_text())["runs"][-1]["shadow_accel"] == want
