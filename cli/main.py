@@ -128,6 +128,13 @@ def load_scene(path):
     return scene
 
 
+def _finite(value, hint):
+    """value, unless it is NaN (which every range check lets through)."""
+    if value is not None and value != value:
+        raise click.BadParameter("must be a number from 0 to 1, got nan", param_hint=hint)
+    return value
+
+
 def _resolution(text):
     """'320x240' -> (320, 240); None stays None."""
     if text is None:
@@ -170,7 +177,7 @@ def parse_frames(text, scene):
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
 @click.option("--spp", type=click.IntRange(1, 1024), help="Samples per pixel (default: render.spp, 1 if unset); 1 = the pixel-centre ray.")
-@click.option("--max-error", type=click.FloatRange(0, 1), metavar="E",
+@click.option("--max-error", type=click.FloatRange(0, 1), metavar="E", callback=lambda ctx, param, v: _finite(v, "--max-error"),
               help="Error budget per pixel in linear RGBA (default: render.max_error, 0 = off): start at the "
                    "pixel centre and give more samples, up to --spp (64 when spp is 1), only to pixels "
                    "whose estimated error is above E.")

@@ -43,3 +43,11 @@ def test_the_demo_is_a_builtin_scene_found_in_the_package(tmp_path):
     res = run("assets", "make", "demo", "-o", tmp_path / "demo")
     assert res.exit_code == 0, res.output
     assert run("check", tmp_path / "demo" / "anim.yaml").exit_code == 0
+
+
+def test_max_error_nan_on_the_command_line_is_refused(tmp_path):
+    """NaN passes every range check; in the scene file it is exit 2 already."""
+    path = scene_with(tmp_path, BALL)
+    res = run("render", path, "-o", tmp_path / "out", "--max-error", "nan", "--frames", "0:0", "-q")
+    assert res.exit_code == 2 and "nan" in res.output
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.exr"))
