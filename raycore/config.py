@@ -45,7 +45,8 @@ EPS_KD_BOX_REL = np.float32(1e-6)
 # Structures -------------------------------------------------------------
 ACCELS = ("grid", "kdtree", "bvh")
 # shadow rays go through the BVH unless a scene or the command line says
-# otherwise: measured 2-5x faster than the grid's on every built-in scene (README)
+# otherwise: measured 1.1-2.9x faster than the grid's on every built-in scene (README,
+# Performance: the kd-tree's single rays are slower still)
 SHADOW_ACCEL = "bvh"
 
 
