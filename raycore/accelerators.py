@@ -10,7 +10,7 @@ structure once and never asks which one it has.
              shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py);
   BvhAccel   the per-frame BVH (refit trees per object under a top level,
              scene_bvh.py): every kind of ray in packets of 64 that share an
-             origin or a direction (bvh_trace.py).
+             origin or a direction (bvh_packets.py, bvh_trace.py).
 
 Counters are named (counters.Counters): `visits` are grid cells or tree
 nodes, and `candidates` are triangles surviving the grid's culling or the
