@@ -41,7 +41,15 @@ MAX_LEAF = 8
 C_TRAVERSE = np.float32(1.0)
 C_INTERSECT = np.float32(1.0)
 INF = np.float32(np.inf)
-STACK = 64           # build and traversal depth bound (trees stay far shallower: leaves <= 8, binned splits)
+# Depth. Binned SAH on coordinates spread over the float range peels off a
+# few triangles per level (triangles at 2^-125 .. 2^125: depth 58 for 8K
+# of them, 107 for 256K), and the stacks below have no bounds checks. So
+# from SAH_DEPTH down a node is split by count (halves): a tree is never deeper
+# than MAX_DEPTH (32 halvings hold 2^32 triangles), and a walk through the
+# top level and one tree never holds more than STACK entries.
+SAH_DEPTH = 48
+MAX_DEPTH = SAH_DEPTH + 32
+STACK = 2 * MAX_DEPTH + 2
 
 
 CHILD, COUNT = 6, 7          # int32 columns of a node row
@@ -122,11 +130,12 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
     m = bounds.shape[0]
     for i in range(m):
         order[i] = i
-    # stack rows: node, first primitive, end
-    st_node = np.empty(STACK * 2, np.int64)
-    st_s = np.empty(STACK * 2, np.int64)
-    st_e = np.empty(STACK * 2, np.int64)
-    st_node[0], st_s[0], st_e[0] = node0, 0, m
+    # stack rows: node, first primitive, end, depth
+    st_node = np.empty(STACK, np.int64)
+    st_s = np.empty(STACK, np.int64)
+    st_e = np.empty(STACK, np.int64)
+    st_d = np.empty(STACK, np.int64)
+    st_node[0], st_s[0], st_e[0], st_d[0] = node0, 0, m, 1
     top = 1
     alloc = node0 + 1
     bin_n = np.zeros((3, N_BINS), np.int64)
@@ -135,7 +144,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
     r_n = np.empty(N_BINS, np.int64)
     while top > 0:
         top -= 1
-        node, s, e = st_node[top], st_s[top], st_e[top]
+        node, s, e, depth = st_node[top], st_s[top], st_e[top], st_d[top]
         n = e - s
         # node box and centroid bounds
         lo0 = lo1 = lo2 = np.float32(np.inf)
@@ -143,19 +152,18 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         c_lo0 = c_lo1 = c_lo2 = np.float32(np.inf)
         c_hi0 = c_hi1 = c_hi2 = np.float32(-np.inf)
         for k in range(s, e):
-            p = k
-            lo0 = min(lo0, bounds[p, 0])
-            lo1 = min(lo1, bounds[p, 1])
-            lo2 = min(lo2, bounds[p, 2])
-            hi0 = max(hi0, bounds[p, 3])
-            hi1 = max(hi1, bounds[p, 4])
-            hi2 = max(hi2, bounds[p, 5])
-            c_lo0 = min(c_lo0, centroids[p, 0])
-            c_lo1 = min(c_lo1, centroids[p, 1])
-            c_lo2 = min(c_lo2, centroids[p, 2])
-            c_hi0 = max(c_hi0, centroids[p, 0])
-            c_hi1 = max(c_hi1, centroids[p, 1])
-            c_hi2 = max(c_hi2, centroids[p, 2])
+            lo0 = min(lo0, bounds[k, 0])
+            lo1 = min(lo1, bounds[k, 1])
+            lo2 = min(lo2, bounds[k, 2])
+            hi0 = max(hi0, bounds[k, 3])
+            hi1 = max(hi1, bounds[k, 4])
+            hi2 = max(hi2, bounds[k, 5])
+            c_lo0 = min(c_lo0, centroids[k, 0])
+            c_lo1 = min(c_lo1, centroids[k, 1])
+            c_lo2 = min(c_lo2, centroids[k, 2])
+            c_hi0 = max(c_hi0, centroids[k, 0])
+            c_hi1 = max(c_hi1, centroids[k, 1])
+            c_hi2 = max(c_hi2, centroids[k, 2])
         box[node, 0], box[node, 1], box[node, 2] = lo0, lo1, lo2
         box[node, 3], box[node, 4], box[node, 5] = hi0, hi1, hi2
         c_lo = (c_lo0, c_lo1, c_lo2)
@@ -163,7 +171,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         best_cost = np.float32(np.inf)
         best_axis = -1
         best_bin = 0
-        if n > 1 and (ext[0] > 0 or ext[1] > 0 or ext[2] > 0):
+        if n > 1 and depth < SAH_DEPTH and (ext[0] > 0 or ext[1] > 0 or ext[2] > 0):
             scale = np.empty(3, np.float32)
             for a in range(3):
                 scale[a] = np.float32(N_BINS) * np.float32(0.99999) / ext[a] if ext[a] > 0 else np.float32(0.0)
@@ -172,13 +180,12 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                     bin_box[a, b, 0] = bin_box[a, b, 1] = bin_box[a, b, 2] = np.float32(np.inf)
                     bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
             for k in range(s, e):
-                p = k
                 for a in range(3):
-                    b = min(int((centroids[p, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                    b = min(int((centroids[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                     bin_n[a, b] += 1
                     for q in range(3):
-                        bin_box[a, b, q] = min(bin_box[a, b, q], bounds[p, q])
-                        bin_box[a, b, 3 + q] = max(bin_box[a, b, 3 + q], bounds[p, 3 + q])
+                        bin_box[a, b, q] = min(bin_box[a, b, q], bounds[k, q])
+                        bin_box[a, b, 3 + q] = max(bin_box[a, b, 3 + q], bounds[k, 3 + q])
             for a in range(3):
                 if ext[a] <= 0:
                     continue
@@ -207,7 +214,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         split_cost = C_TRAVERSE + C_INTERSECT * best_cost / area if area > 0 else np.float32(np.inf)
         leaf_cost = C_INTERSECT * np.float32(n)
         if best_axis < 0 and n > max_leaf:
-            # centroids all in one point (or no finite area): split by count
+            # centroids all in one point, no finite area, or past SAH_DEPTH: split by count
             best_axis = -2
         if n <= max_leaf and (best_axis < 0 or leaf_cost <= split_cost):
             child[node] = s
@@ -236,8 +243,8 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
             mid = s + n // 2
         child[node] = alloc
         count[node] = -1 - split_axis
-        st_node[top], st_s[top], st_e[top] = alloc + 1, mid, e
-        st_node[top + 1], st_s[top + 1], st_e[top + 1] = alloc, s, mid
+        st_node[top], st_s[top], st_e[top], st_d[top] = alloc + 1, mid, e, depth + 1
+        st_node[top + 1], st_s[top + 1], st_e[top + 1], st_d[top + 1] = alloc, s, mid, depth + 1
         top += 2
         alloc += 2
     return alloc - node0
@@ -251,7 +258,7 @@ def sah_cost(box, child, count, root):
     root_area = _area(box[root, 0], box[root, 1], box[root, 2], box[root, 3], box[root, 4], box[root, 5])
     if not root_area > 0:
         return np.float32(0.0)
-    stack = np.empty(STACK * 2, np.int64)
+    stack = np.empty(STACK, np.int64)
     stack[0] = root
     top = 1
     total = np.float64(0.0)

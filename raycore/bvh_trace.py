@@ -42,7 +42,7 @@ def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, i
 def _scratch():
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty((6, 3), np.float32),
-            np.empty((6, 5), np.float32), np.empty(STACK * 2, np.int64))
+            np.empty((6, 5), np.float32), np.empty(STACK, np.int64))
 
 
 @kernel

@@ -304,3 +304,39 @@ def test_the_scene_file_names_the_shadow_structure(tmp_path):
         res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "--frames", "0:0", "-q", *args])
         assert res.exit_code == 0, res.output
         assert json.loads((out / "stats.json").read_text())["runs"][-1]["shadow_accel"] == want
+
+
+def test_trees_stay_within_their_depth_bound():
+    """Triangles spread over the float range (2^-125 .. 2^125) make binned
+    SAH peel off a few per level (256K of them went 107 deep, past the
+    traversal stack). From SAH_DEPTH down every node with more than a leaf's
+    triangles is halved by count, so no tree is deeper than MAX_DEPTH; rays
+    through it agree with brute force."""
+    from raycore.bvh_build import MAX_DEPTH, MAX_LEAF, SAH_DEPTH
+    n = 20000
+    x = (2.0 ** np.linspace(-125, 125, n)).astype(np.float32)
+    tv = np.zeros((n, 9), np.float32)
+    tv[:, 0], tv[:, 3], tv[:, 6] = x, x * np.float32(1.0001), x
+    tv[:, 7] = x * np.float32(1e-3)
+    trees = SceneBvh.of_objects(n)
+    b = trees.update(tv)
+    size = lambda i: int(b.count[i]) if b.count[i] > 0 else size(b.child[i]) + size(b.child[i] + 1)  # noqa: E731
+    deepest, stack = 0, [(0, 1)]
+    while stack:
+        i, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if b.count[i] <= 0 and b.child[i] >= 0:
+            left, right = b.child[i], b.child[i] + 1
+            if depth >= SAH_DEPTH and size(i) > MAX_LEAF:
+                assert abs(size(left) - size(right)) <= 1, (depth, size(left), size(right))
+            stack += [(left, depth + 1), (right, depth + 1)]
+    assert SAH_DEPTH < deepest <= MAX_DEPTH
+    o = np.zeros((400, 3), np.float32)
+    o[:, 1] = 1e-3
+    d = np.zeros((400, 3), np.float32)
+    d[:, 0] = 1.0                                      # along the row of triangles, grazing them all
+    d[:, 1] = -np.float32(1e-3) * np.linspace(0.5, 1.5, 400, dtype=np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    want = brute_force_closest(o, d, np.zeros(400, np.float32), np.full(400, np.inf, np.float32), tv)
+    for mode in (SHARED_ORIGIN, SINGLE):
+        _agree(bvh_trace_rays(b, o, d, mode=mode), want, tv)
