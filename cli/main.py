@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from anim.errors import SceneError
-from raycore.config import PACKET_SIZES
+from raycore.config import ACCELS, PACKET_SIZES
 
 
 class Terminated(KeyboardInterrupt):
@@ -128,6 +128,14 @@ def load_scene(path):
     return scene
 
 
+def _accel_list(text, hint):
+    """'grid, bvh' -> ['grid', 'bvh'], each one of ACCELS."""
+    names = [a.strip() for a in text.split(",") if a.strip()]
+    if not names or any(a not in ACCELS for a in names):
+        raise click.BadParameter(f"comma-separated {', '.join(ACCELS)}", param_hint=hint)
+    return names
+
+
 def _finite(value, hint):
     """value, unless it is NaN (which every range check lets through)."""
     if value is not None and value != value:
@@ -171,8 +179,8 @@ def parse_frames(text, scene):
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
-@click.option("--accel", type=click.Choice(["grid", "kdtree", "bvh"]), help="Acceleration structure of the camera rays: the per-frame uniform grid, an SAH kd-tree with frustum traversal, or the per-frame BVH (default: render.accel, grid).")
-@click.option("--shadow-accel", type=click.Choice(["grid", "kdtree", "bvh"]), help="Acceleration structure of the shadow rays (default: render.shadow_accel, else bvh, measured fastest).")
+@click.option("--accel", type=click.Choice(ACCELS), help="Acceleration structure of the camera rays: the per-frame uniform grid, an SAH kd-tree with frustum traversal, or the per-frame BVH (default: render.accel, grid).")
+@click.option("--shadow-accel", type=click.Choice(ACCELS), help="Acceleration structure of the shadow rays (default: render.shadow_accel, else bvh, measured fastest).")
 @click.option("--packet", type=click.Choice([str(p) for p in PACKET_SIZES]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree and the BVH always use 8x8.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")
 @click.option("--no-shadows", is_flag=True, help="Skip shadow rays (overrides render.shadows).")
@@ -229,9 +237,12 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
     elif scheduler and not threads:
         n_threads = 0                      # each worker: all of its machine's cores
     width, height = res if res else (None, None)
-    if packet and (accel or spec.render.accel) in ("kdtree", "bvh"):
-        name = {"kdtree": "kd-tree", "bvh": "BVH"}[accel or spec.render.accel]
-        click.echo(f"frustrace: warning: --packet is for the grid; the {name} traces 8x8 packets", err=True)
+    structure = accel or spec.render.accel
+    if packet and structure != "grid":
+        from raycore.accelerators import packet_of
+        side = packet_of(structure, int(packet))
+        name = {"kdtree": "kd-tree", "bvh": "BVH"}[structure]
+        click.echo(f"frustrace: warning: --packet is for the grid; the {name} traces {side}x{side} packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
                     width=width, height=height)
@@ -350,13 +361,8 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
         write_report(report, plot_path, json_path)
         click.echo(f"wrote {plot_path} and {json_path}")
         return
-    from raycore.config import ACCELS
-    accels = [a.strip() for a in accel.split(",") if a.strip()]
-    if not accels or any(a not in ACCELS for a in accels):
-        raise click.BadParameter("comma-separated grid, kdtree, bvh", param_hint="--accel")
-    shadow_list = [a.strip() for a in shadow_accels.split(",") if a.strip()]
-    if not shadow_list or any(a not in ACCELS for a in shadow_list):
-        raise click.BadParameter("comma-separated grid, kdtree, bvh", param_hint="--shadow-accel")
+    accels = _accel_list(accel, "--accel")
+    shadow_list = _accel_list(shadow_accels, "--shadow-accel")
     n_threads = set_threads(threads)
     peer_list = []
     if peers:

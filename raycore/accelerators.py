@@ -79,6 +79,12 @@ class KdAccel:
         return h._replace(counters=Counters.of(h.counters))
 
 
+def packet_of(accel: str, grid_packet: int) -> int:
+    """The camera-packet side a structure really traces: the grid's is
+    chosen (grid_packet), the kd-tree's and the BVH's are fixed."""
+    return {"kdtree": KdAccel.packet, "bvh": BvhAccel.packet}.get(accel, grid_packet)
+
+
 class BvhAccel:
     """The frame's BVH (bvh_build.Bvh, kept by scene_bvh.SceneBvh) over tri_verts."""
     name = "bvh"

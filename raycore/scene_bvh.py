@@ -96,7 +96,7 @@ class SceneBvh:
         used = build_region(bounds, centroids, MAX_LEAF, n0, b.box, b.child, b.count, order)
         region = slice(n0, n0 + 2 * m)
         leaves = b.count[region] > 0
-        b.child[n0:n0 + 2 * m][leaves] += r0
+        b.child[region][leaves] += r0
         b.child[n0 + used:n0 + 2 * m] = -1
         b.count[n0 + used:n0 + 2 * m] = 0
         b.tri[r0:r0 + m] = tris[order]
@@ -104,20 +104,24 @@ class SceneBvh:
         self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
         self.used[g] = used
 
+    def build_all(self, tri_verts):
+        """Build every tree anew from these triangle corners (the first
+        frame; bench times it)."""
+        for g in range(len(self.groups)):
+            self._build(tri_verts, g)
+        self.first = False
+
     def update(self, tri_verts) -> Bvh:
         """The tree of this frame's triangle corners tri_verts (n, 9)."""
         t0 = time.perf_counter()
         n_built = 0
         if self.first:
-            for g in range(len(self.groups)):
-                self._build(tri_verts, g)
-                n_built += 1
-            self.first = False
+            self.build_all(tri_verts)
+            n_built = len(self.groups)
             build_ms = (time.perf_counter() - t0) * 1e3
             refit_ms = 0.0
             growth = 1.0
         else:
-            build_ms = 0.0
             idx = self._moving_idx
             if len(idx):
                 b = self.bvh

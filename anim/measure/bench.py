@@ -16,11 +16,11 @@ from anim import builtin
 from anim.errors import SceneError
 from anim.render.renderer import SceneRenderer
 from anim.render.settings import config_of, shading_of
-from anim.render.stats import fps_of, median_ms
+from anim.render.stats import STRUCTURE_KEYS, fps_of, median_ms
 from anim.scene import AnimatedScene
 from raycore.config import SHADOW_ACCEL
-from raycore.frame import KD_PACKET, CameraPose
-from raycore.scene_bvh import SceneBvh
+from raycore.accelerators import packet_of
+from raycore.frame import CameraPose
 from raycore.image_io import write_exr
 
 SCENE_NAMES = tuple(builtin.ALL)
@@ -60,28 +60,24 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
             rows.append({"interp_ms": interp_ms, **result.timings, "write_ms": write_ms,
                          "tri_tests": result.counters["tri_tests"],
                          "shadow_rays": result.counters["shadow_rays"],
-                         **{k: result.counters[k] for k in BVH_COUNTERS if k in result.counters}})
-    row = _row(name, accel, packet if accel == "grid" else KD_PACKET, threads, scene, res, rows)
+                         **{k: result.counters[k] for k in STRUCTURE_KEYS if k in result.counters}})
+    row = _row(name, accel, packet_of(accel, packet), threads, scene, res, rows)
     row["shadow_accel"] = shadow_accel
     if "bvh" in (accel, shadow_accel):
         row.update(bvh_build_costs(scene, renderer, rows))
     return row
 
 
-BVH_COUNTERS = ("bvh_refit_ms", "bvh_top_ms", "bvh_rebuilt", "bvh_sah_growth")
-
-
 def bvh_build_costs(scene, renderer, rows):
     """The BVH's full build (all trees, on the first frame's triangles) and
     median refit of the moving trees, in ms and in ms per 100K triangles;
     how often a refit tree was rebuilt, and its largest SAH growth."""
-    trees = SceneBvh.of_objects(scene.faces.shape[0], scene.moving_object_ranges, scene.moving_triangles)
+    trees = renderer.scene_grid.scene_bvh()
     tri_verts = renderer.scene_grid.tri_verts
     builds = []
     for _ in range(3):
-        trees.first = True
         t0 = time.perf_counter()
-        trees.update(tri_verts)
+        trees.build_all(tri_verts)
         builds.append((time.perf_counter() - t0) * 1e3)
     n_moving = sum(len(g) for g, m in zip(trees.groups, trees.moving) if m)
     n_all = scene.faces.shape[0]

@@ -7,9 +7,7 @@ from anim.render.renderer import SceneRenderer
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
-from raycore.accelerators import KD_PACKET, BvhAccel
-
-BVH_PACKET = BvhAccel.packet
+from raycore.accelerators import packet_of
 
 # each structure traces every ray of its frames, shadow rays included
 STRUCTURES = {
@@ -71,7 +69,7 @@ def compare(path, names, n_frames, res, threads, label=None):
                 images[name] = result._replace(rgba=result.rgba.copy(), z=result.z.copy())
         fps_raycast, fps_full = fps_of(timings)
         rows.append({"structure": name, "triangles": int(scene.faces.shape[0]), "resolution": [width, height],
-                     "packet": {"kdtree": KD_PACKET, "bvh": BVH_PACKET}.get(cfg.accel, cfg.packet),
+                     "packet": packet_of(cfg.accel, cfg.packet),
                      "frames": len(frames),
                      **{k: median_ms(timings, k) for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms",
                                                          "shadow_ms", "primary_tests", "tri_tests",

@@ -7,11 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from raycore.accelerators import BvhAccel
+from raycore.accelerators import packet_of
 from raycore.config import SHADOW_ACCEL, RenderConfig
-from raycore.frame import KD_PACKET
-
-BVH_PACKET = BvhAccel.packet
 
 
 def write_stats(path: Path, scene, cfg, rows, run, file_of, frames) -> dict:
@@ -97,7 +94,7 @@ def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
     size the accelerator really used (the kd-tree's and the BVH's are 8x8)."""
     return {"accel": cfg.accel, "shadow_accel": cfg.shadow_accel or SHADOW_ACCEL,
-            "packet": {"kdtree": KD_PACKET, "bvh": BVH_PACKET}.get(cfg.accel, cfg.packet),
+            "packet": packet_of(cfg.accel, cfg.packet),
             "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
             **({"max_error": cfg.max_error} if cfg.max_error > 0 else {})}
 
