@@ -5,9 +5,12 @@ Every pixel starts with its centre sample (the 1 spp image, exactly as
 without a budget). A pixel's error at 1 spp is estimated from its
 neighbours: half the largest difference (any of R, G, B, A) to one of its
 8 neighbours bounds how far the pixel's footprint can vary around its
-centre. Pixels above the budget E are refined in rounds (7, 15, 31, ...
-samples up to the cap), each pass one new sample offset for the active
-pixels only; the caller traces and shades a group of passes together
+centre (a ring of samples one pixel outside the frame gives the border
+pixels all 8). Pixels above the budget E are refined in rounds
+(sampling.budget_offsets: nested rounds of 7, 15, 31, ... samples while a
+round stays within a quarter of the cap, then the whole plain `--spp cap`
+Hammersley set as the last round), each pass one new sample offset for the
+active pixels only; the caller traces and shades a group of passes together
 (trace_passes), their rays ordered so that a packet holds neighbours.
 After a round a pixel's error is estimated from the means of two halves
 of its samples (those before the round, those of it), |mean_a - mean_b| / 2,
@@ -19,51 +22,27 @@ all miss a feature about 1/n of the pixel wide, and then they agree. A
 pixel at or below E stops, one above goes on until it has the cap: a pixel
 whose estimate is above E always ends with every sample it may have.
 
-Sample offsets (sample_offset): the centre, then points of the
-(0, 2)-sequence, each with its mirror image through the centre: the samples
-of every round, with those before, are stratified like a Hammersley set
-and symmetric about the centre (no shift of the image); rounds nest, so no
-sample is wasted.
+The nested samples (sampling.sample_offset): the centre, then points of
+the (0, 2)-sequence, each with its mirror image through the centre: the
+samples of every round, with those before, are stratified and symmetric
+about the centre (no shift of the image); rounds nest, so no sample is
+wasted. A pixel that reaches the cap therefore holds the plain `--spp cap`
+pattern plus at most cap / 4 earlier samples: it is never worse than the
+uniform image at the cap (tests/test_error_budget.py).
+
+What is guaranteed is the estimate, not the true error: every pixel ends
+with its estimate at or below E, or with every sample it may have. A
+feature that no sample of a pixel or of its neighbours touches (a sliver
+thinner than the samples' spacing) is invisible to the estimate.
 """
 import numpy as np
 from numba import prange
 
 from ._jit import kernel, parallel_arith_kernel
 from .camera import primary_dir
+from .sampling import budget_offsets
 
-# samples a refined pixel has after each round: the centre and 3, 7, 15, ... pairs
-ROUND_TOTALS = (7, 15, 31, 63, 127, 255, 511, 1023)
 BLOCK = 8                    # active pixels are ordered by BLOCK x BLOCK blocks: packets of neighbours
-
-
-def sobol_point(i: int) -> tuple:
-    """Point i of the (0, 2)-sequence (Sobol's first two dimensions) with a
-    digital shift of 1/2 (point 0 is (1/2, 1/2)): every run of 2^k points
-    starting at a multiple of 2^k is a (0, k, 2)-net, one point in each of
-    the 2^k strips of the square, across or along, as Hammersley's."""
-    x = y = 0
-    v = 1 << 31
-    for bit in range(32):
-        if i >> bit & 1:
-            x ^= 1 << (31 - bit)              # van der Corput: the bits reversed
-            y ^= v
-        v ^= v >> 1
-    return ((x ^ (1 << 31)) / 2.0 ** 32, (y ^ (1 << 31)) / 2.0 ** 32)
-
-
-def sample_offset(i: int) -> tuple:
-    """Sub-pixel offset of a pixel's sample i: 0 the centre, then pairs of a
-    point q and its mirror image 1 - q through the centre, q running over
-    the even points of the sequence (sobol_point(2m), which lie in the
-    pixel's right half, the centre being the first). A net alone sits on
-    multiples of 1/n, so its mean lies half a stratum off the centre (an
-    image shifted by 1/(2n) pixel); mirrored, every prefix that ends a pair
-    is symmetric about the centre and integrates a linear ramp exactly. The
-    first 2^k - 1 samples are two (0, k - 1, 2)-nets of the two halves."""
-    if i == 0:
-        return 0.5, 0.5
-    x, y = sobol_point(2 * ((i + 1) // 2))
-    return (x, y) if i % 2 else (1.0 - x, 1.0 - y)
 
 
 @parallel_arith_kernel
@@ -134,23 +113,56 @@ def half_difference(first, sums, n_first, n_second):
     return (np.abs(a - b) / 2).max(axis=1)
 
 
+def with_border_ring(rgba, width, height, bg, trace_passes):
+    """The 1-spp image (H*W, 4) with a ring of samples one pixel outside it,
+    ((H+2)*(W+2), 4): a border pixel's contrast then sees what lies just
+    beyond the frame. Without it, an object entering through the bottom
+    edge, below the last row's centres, left the corner pixel of hand at
+    64^2 with error 0.17 under every budget (issue 20): its neighbours all
+    agreed. The ring costs 2 (W + H) + 4 camera rays, in three calls: the
+    top row's pixels reach both horizontal sides (offsets y = -1/2 and
+    H + 1/2), the left column's both vertical sides, pixel 0 the corners."""
+    padded = np.empty((height + 2, width + 2, 4), np.float32)
+    padded[1:-1, 1:-1] = rgba.reshape(height, width, 4)
+    top, left = np.arange(width, dtype=np.int64), np.arange(height, dtype=np.int64) * width
+    corner = np.zeros(1, np.int64)
+    calls = ((top, [(0.5, -0.5), (0.5, height + 0.5)], [(0, slice(1, -1)), (-1, slice(1, -1))]),
+             (left, [(-0.5, 0.5), (width + 0.5, 0.5)], [(slice(1, -1), 0), (slice(1, -1), -1)]),
+             (corner, [(-0.5, -0.5), (width + 0.5, -0.5), (-0.5, height + 0.5), (width + 0.5, height + 0.5)],
+              [(0, 0), (0, -1), (-1, 0), (-1, -1)]))
+    for pixels, offsets, places in calls:
+        for (hit_pixel, rgb, _), place in zip(trace_passes(pixels, offsets, aov=False), places):
+            side = np.empty((pixels.size, 4), np.float32)
+            side[:, :3], side[:, 3] = bg, 0.0
+            rows = np.searchsorted(pixels, hit_pixel)
+            side[rows, :3], side[rows, 3] = rgb.T, 1.0
+            padded[place] = side if pixels.size > 1 else side[0]
+    return padded.reshape(-1, 4)
+
+
 def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     """Spend samples where the 1-spp image `rgba` (H*W, 4), `z` (H*W,) is
-    above `max_error`, up to `cap` samples per pixel, and write the means
+    above `max_error`, up to the plain `cap`-sample set per pixel (plus the
+    nested samples before it, sampling.budget_offsets), and write the means
     back into rgba and the nearest depth into z; a miss counts as
     `background` with A = 0.
 
-    trace_passes(pixels, offsets) traces, for the pixel indices `pixels` (in
-    block order), one camera ray each at every sub-pixel offset of
-    `offsets`, shades the samples and returns per offset (surface_pixel,
-    rgb (3, k), depth (k,)) of those that hit.
+    trace_passes(pixels, offsets, aov=True) traces, for the pixel indices
+    `pixels` (in block order), one camera ray each at every sub-pixel offset
+    of `offsets`, shades the samples and returns per offset (surface_pixel,
+    rgb (3, k), depth (k,)) of those that hit; aov=False: samples that are
+    not the pixel's (the border ring, offsets outside [0, 1]), kept out of
+    the AOVs.
 
     Returns (samples per pixel (H*W,) int32, error estimate (H*W,) f32):
     the estimate a pixel stopped at (1 spp: the neighbour contrast)."""
     n_pix = width * height
     samples = np.ones(n_pix, np.int32)
-    estimate = np.empty(n_pix, np.float32)
-    neighbour_contrast(rgba, width, height, estimate)
+    bg = np.asarray(background, np.float32)
+    padded = with_border_ring(rgba, width, height, bg, trace_passes)
+    contrast = np.empty((height + 2) * (width + 2), np.float32)
+    neighbour_contrast(padded, width + 2, height + 2, contrast)
+    estimate = np.ascontiguousarray(contrast.reshape(height + 2, width + 2)[1:-1, 1:-1]).reshape(-1)
     contrast = estimate.copy()
     active = np.flatnonzero(estimate > max_error).astype(np.int64)
     if cap <= 1 or active.size == 0:
@@ -163,17 +175,17 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     slot = np.full(n_pix, -1, np.int64)
     slot[active] = np.arange(m)
     value = np.empty((m, 4), np.float32)
-    bg = np.asarray(background, np.float32)
+    offsets, totals = budget_offsets(cap)
     done = 1
     live = np.arange(m)                                   # slots still above the budget
-    for total in ROUND_TOTALS:
-        total = min(total, cap)
-        if total <= done or live.size == 0:
+    for total in totals:
+        if live.size == 0:
             break
         pixels = active[live]
-        # the first half: the centre and the first half of the pairs, i.e. the
-        # samples before this round (when the cap cuts a round short, those too)
-        half_at = max((total - 1) // 2, done)
+        # the estimate compares two halves: in a nested round, the centre and
+        # the first half of the pairs against the rest; in the last round, the
+        # samples before it against the plain set
+        half_at = done if total == totals[-1] else max((total - 1) // 2, done)
         half = sums[live] if done == half_at else None
         # the round's passes in groups of about one image's worth of samples:
         # traced and shaded together, their shadow rays are one denser set
@@ -183,8 +195,7 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
             end = min(i + group, total)
             if i < half_at < end:
                 end = half_at                              # a group ends at the half
-            ids = range(i, end)
-            for hit_pixel, rgb, depth in trace_passes(pixels, [sample_offset(k) for k in ids]):
+            for hit_pixel, rgb, depth in trace_passes(pixels, offsets[i:end]):
                 add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, zmin, value)
             if end == half_at:
                 half = sums[live]                          # a copy

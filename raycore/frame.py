@@ -15,6 +15,7 @@ from .adaptive import camera_rays_of, refine
 from .camera import camera_basis
 from .config import ADAPTIVE_SPP_CAP, SHADOW_ACCEL, RenderConfig
 from .kdtree_build import build_kdtree
+from .sampling import sample_offsets
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
 from .shadow_rays import LightRays
@@ -56,26 +57,6 @@ class FrameResult(NamedTuple):
     timings: dict             # phase -> ms
     counters: dict            # rays, tri_tests, cells, ...
     samples: np.ndarray = None  # (H*W,) i32 samples per pixel, under an error budget only
-
-
-def sample_offsets(spp: int) -> list:
-    """Sub-pixel offsets: the pixel centre for spp = 1, else a Hammersley set
-    (stratified in x, radical inverse in y), both centred in their strata:
-    the radical inverse alone starts at 0 and would shift every sample half
-    a stratum up (a bias of 1/(2 spp) pixel, found by
-    tests/test_error_budget.py). Deterministic, low discrepancy."""
-    if spp <= 1:
-        return [(0.5, 0.5)]
-    out = []
-    half_cell = 0.5 / (1 << (spp - 1).bit_length())     # the radical inverses are multiples of 2 half_cell
-    for i in range(spp):
-        bits, f, inv = i, 0.0, 0.5
-        while bits:
-            f += inv * (bits & 1)
-            bits >>= 1
-            inv *= 0.5
-        out.append(((i + 0.5) / spp, f + half_cell))
-    return out
 
 
 class FrameBuffers:
@@ -122,7 +103,7 @@ def light_groups(lights, lit):
 
 def probe_rows(rows, n_probes):
     """The emitters traced for every point first: the group's first n_probes
-    (its emitters follow a Halton sequence, whose every prefix spreads over
+    (its emitters come in mirrored pairs, whose every prefix spreads over
     the whole light: anim/area_lights.py), or all of them when probing is
     off or pointless."""
     if n_probes <= 0 or n_probes >= len(rows):
@@ -265,6 +246,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         samples = refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays,
                                 timings, aovs)
         counters["adaptive_spp_mean"] = float(samples.mean())
+        counters["spp_cap"] = adaptive_cap(cfg)
         counters["rays_left_out"] = adaptive_cap(cfg) * W * H - counters["rays"]
     return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs.channels(H, W) if aovs else {},
                        timings, counters, samples)
@@ -324,7 +306,7 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
     layout = row_major_offsets(W, H)
     eye = np.asarray(cam[:3], np.float32)
 
-    def trace_passes(pixels, offsets):
+    def trace_passes(pixels, offsets, aov=True):
         # every offset's camera rays in one batch, pixel-major (a pixel's rays
         # side by side), so that a packet spans as few pixels as it can
         t0 = time.perf_counter()
@@ -344,7 +326,7 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
             full_b2[pixels] = hits.b2[j::g]
             surface = gather(offset, full_t, full_prim, full_b1, full_b2, layout)
             full_prim[pixels] = -1
-            if aovs is not None:
+            if aovs is not None and aov:
                 aovs.add(surface)
             surfaces.append(Surface(*(np.array(f) for f in surface)))     # out of the workspace
         # the passes' samples shadowed and shaded as one set

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from anim.area_lights import emitter_positions, halton
+from anim.area_lights import emitter_positions, emitter_uv
 from anim.scene import AnimatedScene
 from cli.main import main
 from anim.render.renderer import SceneRenderer
@@ -26,12 +26,22 @@ def render(tmp_path, lights, size=(64, 48), shadows=True):
     return SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)[1].rgba
 
 
-def test_a_tiny_area_light_is_the_point_light(tmp_path):
+def test_a_zero_size_area_light_is_the_point_light(tmp_path):
+    """Bit for bit with one emitter (it is the centre); with several, every
+    emitter is the same point and only the float sum of their shares
+    differs (issue 20: Halton's emitters of a 1e-6 light moved its shadow,
+    1e-3 off in 2 pixels)."""
     point = render(tmp_path, "lights: [{type: point, position: [1, 4, 1], intensity: 30}]")
-    for shape in ("{corner: [1, 4, 1], edge_u: [1e-6, 0, 0], edge_v: [0, 0, 1e-6]}",
-                  "{center: [1, 4, 1], radius: 0}"):
-        area = render(tmp_path, f"lights: [{{type: area, intensity: 30, samples: 8, {shape[1:-1]}}}]")
-        np.testing.assert_allclose(area, point, rtol=1e-3, atol=1e-5)
+    for shape in ("{corner: [1, 4, 1], edge_u: [0, 0, 0], edge_v: [0, 0, 0]}",
+                  "{corner: [0.9, 4, 0.9], edge_u: [0.2, 0, 0], edge_v: [0, 0, 0.2]}",
+                  "{center: [1, 4, 1], radius: 0}", "{center: [1, 4, 1], radius: 0.3}"):
+        one = render(tmp_path, f"lights: [{{type: area, intensity: 30, samples: 1, {shape[1:-1]}}}]")
+        np.testing.assert_array_equal(one, point)
+        if "0.2" in shape or "0.3" in shape:
+            continue
+        for samples in (2, 7, 8):
+            area = render(tmp_path, f"lights: [{{type: area, intensity: 30, samples: {samples}, {shape[1:-1]}}}]")
+            np.testing.assert_allclose(area, point, rtol=2e-6, atol=1e-7)
 
 
 def test_an_area_light_casts_soft_shadows(tmp_path):
@@ -74,22 +84,57 @@ def test_unshadowed_irradiance_converges_to_the_integral_over_the_light():
     assert errors[-1] < 5e-3 and errors[-1] < errors[0], errors
 
 
-def test_halton_points_and_their_prefixes_spread_over_the_square():
-    pts = halton(64)
+def test_emitter_points_and_their_prefixes_spread_over_the_square():
+    pts = emitter_uv(64)
     assert np.all((pts > 0) & (pts < 1))
-    for n in (8, 16, 64):                       # every prefix from 8 on covers every quadrant
+    for n in (2, 8, 16, 64):                    # every prefix that ends a pair has its centroid at the centre
+        np.testing.assert_allclose(pts[:n].mean(axis=0), 0.5, atol=1e-12)
+    for n in (6, 8, 16, 64):                    # and from 6 on covers every quadrant
         q = np.floor(pts[:n] * 2).astype(int)
         assert len({(a, b) for a, b in q}) == 4, n
-    assert sorted(np.floor(pts[:16, 0] * 16).astype(int)) == list(range(16))     # base 2: stratified
+    for n, k in ((16, 4), (16, 8), (64, 8), (64, 16)):   # about n / k in every strip, across and along
+        for axis in (0, 1):
+            counts = np.bincount(np.floor(pts[:n, axis] * k).astype(int), minlength=k)
+            assert np.abs(counts - n / k).max() <= 3, (n, k, counts)
+
+
+class Rect:
+    corner, edge_u, edge_v, center, radius = (1.0, 2.0, 3.0), (2.0, 0.0, 0.5), (0.0, 0.0, 1.0), None, None
+
+
+class Sphere:
+    corner = None
+    center, radius = (1.0, 2.0, 3.0), 0.5
+
+
+@pytest.mark.parametrize("shape", [Rect, Sphere])
+@pytest.mark.parametrize("samples", [1, 2, 3, 4, 5, 16, 64])
+def test_any_number_of_emitters_is_centred_on_the_light(shape, samples):
+    """Issue 20: Halton from (1/2, 1/3) put one sample 1/6 of edge_v off the
+    rectangle's centre (its shadow moved), one sphere sample on its surface,
+    and the centroid of 4 at (0.41, 0.39)."""
+    shape.samples = samples
+    p = emitter_positions(shape)
+    centre = (np.asarray(shape.center) if shape.corner is None else
+              np.asarray(shape.corner) + 0.5 * np.add(shape.edge_u, shape.edge_v))
+    assert p.shape == (samples, 3)
+    np.testing.assert_allclose(p.mean(axis=0), centre, atol=1e-12)
+    if samples == 1:
+        assert np.all(p[0] == centre)                 # one sample is the point light at the centre
+    assert len(np.unique(p, axis=0)) == samples
 
 
 def test_a_sphere_lights_emitters_lie_on_its_surface():
-    class Sphere:
-        corner = None
-        center, radius, samples = (1.0, 2.0, 3.0), 0.5, 64
+    Sphere.samples = 64
     p = emitter_positions(Sphere)
     np.testing.assert_allclose(np.linalg.norm(p - Sphere.center, axis=1), 0.5)
-    assert np.abs(p.mean(axis=0) - Sphere.center).max() < 0.05
+    Sphere.samples = 65                              # an odd count: the centre last
+    p = emitter_positions(Sphere)
+    np.testing.assert_allclose(np.linalg.norm(p[:-1] - Sphere.center, axis=1), 0.5)
+    assert np.all(p[-1] == Sphere.center)
+    # the first point of each pair covers the lower hemisphere evenly
+    z = (p[:-1:2, 2] - Sphere.center[2]) / 0.5
+    assert np.all(z <= 0) and abs(z.mean() + 0.5) < 0.02
 
 
 @pytest.mark.parametrize("light, words", [

@@ -111,7 +111,7 @@ def test_supersampling_averages_coverage_and_keeps_nearest_depth(tmp_path):
     # Z is the nearest of the samples: trace each sample alone and compare
     from oracles import kernel_camera_rays
     from raycore.camera import camera_basis
-    from raycore.frame import sample_offsets
+    from raycore.sampling import sample_offsets
     from raycore.grid_build import build_grid
     from raycore.trace import trace_camera
     w, h = scene.spec.output.resolution

@@ -68,8 +68,11 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             "fallback_rays": result.counters["fallback_rays"],
             # the structures this frame built: grid cells, kd-tree nodes, BVH refit and rebuilds
             **{k: result.counters[k] for k in STRUCTURE_KEYS if k in result.counters},
-            # under an error budget: camera rays not spent against spp (the cap) everywhere
-            **({"rays_left_out": result.counters["rays_left_out"],
+            # under an error budget: the cap in force, and the camera rays not
+            # spent against plain spp at that cap everywhere (negative when most
+            # pixels took the cap: a capped pixel also keeps its earlier samples)
+            **({"spp_cap": result.counters["spp_cap"],
+                "rays_left_out": result.counters["rays_left_out"],
                 "spp_mean": result.counters["adaptive_spp_mean"]} if "rays_left_out" in result.counters else {}),
             "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
 
