@@ -5,6 +5,8 @@ Work a scene does not need is left out: a static object (one mesh, or one
 keyframe, or constant tracks) is placed once; a rigid object costs one 4x4
 transform per frame; only deforming objects evaluate per-vertex curves.
 """
+import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +20,7 @@ from .interpolate import Curve
 from .mesh_io import load_mesh, vertex_lines
 from .rig import Skeleton
 from .rigid_batch import RigidBatch
-from .schema import SceneFile
+from .schema import SceneFile, parse_scene
 from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from .vertex_kernels import skin_into, transform_into
 
@@ -50,6 +52,13 @@ class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
         return super().construct_mapping(node, deep=deep)
 
 
+# YAML 1.2's floats: PyYAML (YAML 1.1) reads 1e37 and 1E-5, without a dot, as
+# strings, which the strict schema would refuse; they are numbers to a user
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
 def read_scene_file(path) -> SceneFile:
     path = Path(path)
     try:
@@ -68,12 +77,16 @@ def read_scene_file(path) -> SceneFile:
     if not isinstance(data, dict):
         raise SceneError(path, "", "top level must be a mapping")
     try:
-        return SceneFile.model_validate(data)
+        return parse_scene(data)
+    except TypeError as exc:
+        raise SceneError(path, "", str(exc)) from None
     except ValidationError as exc:
         err = exc.errors()[0]
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
+        elif err["type"] in ("int_type", "float_type", "bool_type", "string_type"):
+            msg += f", not {json.dumps(err['input'])}"      # `samples: true` reads "..., not true"
         raise SceneError(path, _key_path(err["loc"]) or "(top)", msg) from None
 
 
@@ -264,7 +277,9 @@ class AnimatedScene:
         these frames (every frame of an animated camera; vectorized, in
         blocks, so that a million frames take a second)."""
         keyed = self._camera_curve is not None
-        frames = np.asarray(frames if keyed else frames[:1], np.int64)
+        frames = frames if keyed else frames[:1]
+        frames = (np.arange(frames.start, frames.stop, frames.step) if isinstance(frames, range)
+                  else np.asarray(frames, np.int64))
         with np.errstate(all="ignore"):      # an overflow is judged below, not printed
             self._check_camera_frames(frames, keyed)
 
@@ -346,7 +361,7 @@ class AnimatedScene:
 
     @property
     def frame_numbers(self):
-        return list(range(self.spec.frames.start, self.spec.frames.end + 1))
+        return range(self.spec.frames.start, self.spec.frames.end + 1)
 
     def time_of(self, frame):
         return frame / self.spec.frames.fps

@@ -10,6 +10,7 @@ more interpolation methods (anim/interpolate.py), rotation tracks with
 `slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
 glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`.
 """
+import json
 import re
 from typing import Annotated, Dict, List, Literal, Optional, Tuple, Union
 
@@ -20,6 +21,9 @@ from raycore.config import PACKET_SIZES
 # coordinates and colours stay inside float32 with room for arithmetic (anim/tracks.py)
 Coord = Annotated[float, Field(ge=-1e37, le=1e37)]
 Vec3 = Tuple[Coord, Coord, Coord]
+# colours are linear RGB: no negative light or reflectance (issue 20: they gave negative pixels)
+Channel = Annotated[float, Field(ge=0, le=1e37)]
+Colour = Tuple[Channel, Channel, Channel]
 Interp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
                  "pchip", "akima", "makima"]
 TrackInterp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
@@ -30,7 +34,10 @@ MAX_FRAMES = 10_000_000
 
 
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    """No unknown keys, no infinities, and no coercion: `samples: true`,
+    `samples: "16"` and `shadows: 1` are errors, not 1, 16 and true (strict
+    mode; scene data is validated as JSON, where a list may fill a tuple)."""
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class Frames(Strict):
@@ -100,7 +107,7 @@ class Render(Strict):
     packet: int = 32           # one of raycore.config.PACKET_SIZES
     shadows: bool = True
     spp: Annotated[int, Field(ge=1, le=1024)] = 1
-    background: Vec3 = (0.0, 0.0, 0.0)
+    background: Colour = (0.0, 0.0, 0.0)
     ambient: Annotated[float, Field(ge=0)] = 0.03
     grid_density: Annotated[float, Field(gt=0, le=64)] = 0.25
     # area lights: trace this many emitters for every point first, and the
@@ -134,7 +141,7 @@ class Light(Strict):
     center: Optional[Vec3] = None
     radius: Optional[Annotated[float, Field(ge=0, le=1e37)]] = None
     samples: Annotated[int, Field(ge=1, le=4096)] = 16
-    color: Vec3 = (1.0, 1.0, 1.0)
+    color: Colour = (1.0, 1.0, 1.0)
     intensity: Annotated[float, Field(ge=0)] = 1.0
 
     @model_validator(mode="after")
@@ -155,7 +162,7 @@ class Light(Strict):
 
 
 class Material(Strict):
-    diffuse: Vec3 = (0.8, 0.8, 0.8)
+    diffuse: Colour = (0.8, 0.8, 0.8)
     specular: Annotated[float, Field(ge=0)] = 0.0
     shininess: Annotated[float, Field(ge=0)] = 32.0
     texture: Optional[str] = None
@@ -250,3 +257,12 @@ class SceneFile(Strict):
     lights: List[Light] = []
     materials: Dict[str, Material] = {}
     objects: List[Object]
+
+
+def parse_scene(data: dict) -> "SceneFile":
+    """A scene file's parsed YAML, validated strictly (Strict): through JSON,
+    so that YAML lists fill tuples as in JSON. A value JSON cannot hold (a
+    date, a set) is a TypeError naming its type."""
+    def refuse(value):
+        raise TypeError(f"a value of type {type(value).__name__} ({value!r}) is not allowed here")
+    return SceneFile.model_validate_json(json.dumps(data, default=refuse))

@@ -56,6 +56,16 @@ def _interrupt_in(exc):
     return None
 
 
+def _one_line(self, file=None):
+    """click's usage errors in one line, as frustrace's own errors (click
+    prints Usage, Try, a blank line and Error: four lines)."""
+    where = f"; see '{self.ctx.command_path} --help'" if self.ctx is not None else ""
+    click.echo(f"frustrace: error: {self.format_message().rstrip('.')}{where}", err=True)
+
+
+click.UsageError.show = _one_line
+
+
 class Group(click.Group):
     """Turns SceneError into one line on stderr and exit code 2; Ctrl-C into
     exit 130 and SIGTERM into 143 after the render loop has cleaned up; an
@@ -81,9 +91,12 @@ class Group(click.Group):
             if exc is None:
                 return self._internal_error(caught)
             what = "terminated" if isinstance(exc, Terminated) else "interrupted"
-            if ctx.invoked_subcommand == "render":
-                what += ("; every frame written is complete and listed in stats.json, "
+            stats_path = ctx.meta.get("frustrace.stats_path")
+            if ctx.invoked_subcommand == "render" and stats_path is not None and Path(stats_path).exists():
+                what += (f"; every frame written is complete and listed in {stats_path}, "
                          "none is half-written (--resume renders the rest)")
+            elif ctx.invoked_subcommand == "render":
+                what += " before any frame was rendered; nothing was written"
             click.echo(f"frustrace: {what}", err=True)
             sys.exit(143 if isinstance(exc, Terminated) else 130)
         except (FrameWriteError, FrameRenderError) as exc:
@@ -171,7 +184,7 @@ def parse_frames(text, scene):
     from anim.schema import MAX_FRAMES
     if end - start >= MAX_FRAMES:
         raise click.BadParameter(f"{end - start + 1:,} frames; at most {MAX_FRAMES:,}", param_hint="--frames")
-    return list(range(start, end + 1))
+    return range(start, end + 1)
 
 
 @main.command()
@@ -261,6 +274,7 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
         from anim.render.cluster import bundle_scene, connect, security_of
         bundle_scene(scene)                # a file that cannot travel is an error before any cluster starts
         client, cluster = connect(scheduler, workers, security=security_of(tls_ca, tls_cert, tls_key))
+    click.get_current_context().meta["frustrace.stats_path"] = job.stats_path    # for the interrupt message
     stop = StopRequest()
     before = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

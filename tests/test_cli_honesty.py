@@ -2,6 +2,8 @@
 compare's scene name and image size, the demo found from the package."""
 import json
 
+import pytest
+
 from click.testing import CliRunner
 
 from cli.main import main
@@ -51,3 +53,18 @@ def test_max_error_nan_on_the_command_line_is_refused(tmp_path):
     res = run("render", path, "-o", tmp_path / "out", "--max-error", "nan", "--frames", "0:0", "-q")
     assert res.exit_code == 2 and "nan" in res.output
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.exr"))
+
+
+@pytest.mark.parametrize("args, words", [
+    (["render", "--spp", "x", "scene.yaml"], ["--spp", "'x'", "frustrace render --help"]),
+    (["render"], ["Missing argument", "frustrace render --help"]),
+    (["bogus"], ["No such command 'bogus'"]),
+    (["bench", "--res", "0"], ["--res"]),
+])
+def test_option_errors_are_one_line_and_exit_2(args, words):
+    """Issue 20: click printed Usage, Try, a blank line and Error (four lines)."""
+    res = CliRunner().invoke(main, args, prog_name="frustrace")
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("frustrace: error: "), res.output
+    assert all(w in lines[0] for w in words), lines[0]

@@ -288,3 +288,47 @@ def test_ctrl_c_in_bench_says_nothing_about_frames(tmp_path):
     assert proc.wait(timeout=60) == 130
     err = proc.stderr.read()
     assert "interrupted" in err and "frame" not in err and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGTERM, 143)])
+def test_the_longest_range_starts_at_once_and_stops_within_a_second(tmp_path, sig, code):
+    """Issue 20: --frames 0:9999999 (the documented maximum) spent minutes
+    planning, a stat per frame, with the signal handlers already waiting
+    for the frame loop: SIGTERM at 120 s exited at 322 s with nothing
+    written. Now the plan is lazy: the first frames come at once, the
+    signal acts at the next frame, and stats.json reads the directory once."""
+    out = tmp_path / "out"
+    proc = frustrace("render", DEMO, "-o", out, "--frames", "0:9999999", "--res", "16x16", "-q")
+    t0 = time.monotonic()
+    while proc.poll() is None and (len(exr_frames(out)) if out.exists() else 0) < 3 and time.monotonic() - t0 < 240:
+        time.sleep(0.01)
+    assert len(exr_frames(out)) >= 3, proc.stderr.read()
+    sent = time.monotonic()
+    proc.send_signal(sig)
+    assert proc.wait(timeout=60) == code
+    assert time.monotonic() - sent < 5
+    stats = json.loads((out / "stats.json").read_text())
+    assert [f["frame"] for f in stats["frames"]] == [int(p.stem[-4:]) for p in exr_frames(out)]
+    # --resume over the same range skips what is there, as lazily
+    proc = frustrace("render", DEMO, "-o", out, "--frames", "0:9999999", "--res", "16x16", "-q", "--resume")
+    n_before = len(exr_frames(out))
+    while proc.poll() is None and len(exr_frames(out)) < n_before + 2:
+        time.sleep(0.01)
+    proc.send_signal(sig)
+    assert proc.wait(timeout=60) == code
+    stats = json.loads((out / "stats.json").read_text())
+    assert len(stats["frames"]) == len(exr_frames(out)) > n_before
+
+
+def test_an_interrupt_before_any_frame_says_nothing_was_written(tmp_path, monkeypatch):
+    """Issue 20: the message said frames were "listed in stats.json" though
+    no output folder had been made."""
+    import anim.render.job
+
+    def interrupted(*a, **kw):
+        raise KeyboardInterrupt()
+    monkeypatch.setattr(anim.render.job, "render_animation", interrupted)
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "never"), "--res", "16x16", "-q"])
+    assert res.exit_code == 130
+    assert "nothing was written" in res.output and "stats.json" not in res.output
+    assert not (tmp_path / "never").exists()

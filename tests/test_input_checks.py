@@ -292,3 +292,40 @@ def test_a_packet_size_the_kernels_do_not_take_is_named(tmp_path):
     path = scene_with(tmp_path, BALL, extra="render: {packet: 12}")
     res = run("check", path)
     assert res.exit_code == 2 and "render.packet" in res.output and "4, 8, 16, 32" in res.output, res.output
+
+
+@pytest.mark.parametrize("old, new, key, words", [
+    # negative light and reflectance gave negative pixels (issue 20)
+    ("intensity: 30}]", "intensity: 30, color: [-1, 1, 1]}]", "lights.0.color.0", ["greater than or equal to 0"]),
+    ("objects:", "materials: {m: {diffuse: [-0.8, 0.5, 0.5]}}\nobjects:", "materials.m.diffuse.0", ["greater than or equal to 0"]),
+    ("objects:", "render: {background: [-1, 0, 0]}\nobjects:", "render.background.0", ["0"]),
+    # no coercion: a bool or a string is not a number (issue 20: samples: true was 1)
+    ("{type: point, position: [3, 5, 4],", "{type: area, corner: [0, 3, 0], edge_u: [1, 0, 0], edge_v: [0, 0, 1], "
+     "samples: true,", "lights.0.samples", ["valid integer", "not true"]),
+    ("{type: point, position: [3, 5, 4],", "{type: area, corner: [0, 3, 0], edge_u: [1, 0, 0], edge_v: [0, 0, 1], "
+     "samples: \"16\",", "lights.0.samples", ["valid integer", 'not "16"']),
+    ("objects:", "render: {light_probes: true}\nobjects:", "render.light_probes", ["not true"]),
+    ("objects:", "render: {shadows: 1}\nobjects:", "render.shadows", ["valid boolean", "not 1"]),
+    ("intensity: 30}]", "intensity: \"30\"}]", "lights.0.intensity", ["valid number"]),
+    ("frames: {start: 0,", "frames: {start: true,", "frames.start", ["not true"]),
+])
+def test_negative_colours_and_coerced_types_are_refused(tmp_path, old, new, key, words):
+    path = scene_with(tmp_path, BALL)
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+    assert_rejected(path, key, words, tmp_path)
+
+
+def test_radiance_past_the_half_float_range_is_warned_and_counted(tmp_path):
+    path = scene_with(tmp_path, BALL)
+    path.write_text(path.read_text().replace("intensity: 30}]", "intensity: 1e37}]"))
+    res = run("render", path, "-o", tmp_path / "out", "--frames", "0:1", "--res", "24x16")
+    assert res.exit_code == 0, res.output
+    warned = [line for line in res.output.splitlines() if "largest half" in line]
+    assert len(warned) == 1 and "+inf" in warned[0] and "frame 0" in warned[0]
+    stats = __import__("json").loads((tmp_path / "out" / "stats.json").read_text())
+    assert stats["frames"][0]["half_overflow"] > 0
+    ok = scene_with(tmp_path, BALL)
+    res = run("render", ok, "-o", tmp_path / "ok", "--frames", "0:1", "--res", "24x16")
+    assert "largest half" not in res.output

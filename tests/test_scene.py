@@ -171,8 +171,8 @@ objects:
 def test_the_spec_example_still_validates():
     """The schema extensions (skeletons, glTF, more methods) stay backward compatible."""
     import yaml
-    from anim.schema import SceneFile
-    spec = SceneFile.model_validate(yaml.safe_load(SPEC_EXAMPLE))
+    from anim.schema import parse_scene
+    spec = parse_scene(yaml.safe_load(SPEC_EXAMPLE))
     assert spec.objects[0].interpolation == "catmull-rom" and spec.objects[1].transform.rotation is not None
 
 

@@ -17,7 +17,7 @@ from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.image_io import temp_path, write_exr
 
-from .frame_files import frame_file, plan_frames
+from .frame_files import existing_frames, frame_file, plan_frames
 from .output_dir import claim, release, remove_stale_temps
 from .paths import writable_dir, writable_file
 from .renderer import SceneRenderer, check_memory, warm_up
@@ -59,8 +59,8 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     scene, cfg = job.scene, job.cfg
     warn = warn or (lambda message: None)
     todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn)
-    stale = {path for _, path in todo if path.exists()}     # to be rendered again (not whole)
-    for directory in sorted({path.parent for _, path in todo}):
+    stale = todo.stale                   # existing files to be rendered again (not whole)
+    for directory in [todo.directory] if len(todo) else []:
         writable_dir(directory, "frames")
         for name in remove_stale_temps(directory):
             warn(f"removed {directory / name}, left by a render that was killed")
@@ -77,7 +77,14 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         claimed.add(path)
         return True
 
+    overflow_told = []
+
     def done(path, row):
+        if row.get("half_overflow") and not overflow_told:
+            overflow_told.append(row["frame"])
+            warn(f"frame {row['frame']}: {row['half_overflow']:,} RGB values are above 65504, the largest half "
+                 "float, and are written as +inf (lower the lights' intensity; stats.json counts them per "
+                 "frame as half_overflow)")
         rows.append(row)             # in stats only once on disk
         release(path)
         claimed.discard(path)        # released: a later claim on it is another render's
@@ -102,7 +109,8 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
                "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
-                                lambda f: frame_file(scene, job.out_dir, f), job.frames)
+                                lambda f: frame_file(scene, job.out_dir, f),
+                                lambda: existing_frames(scene, job.out_dir, job.frames))
         except OSError as exc:
             message = f"cannot write {job.stats_path}: {exc.strerror or exc}"
             if ended == "complete":
@@ -117,9 +125,9 @@ def _render_here(job, todo, take, done, on_frame, should_stop, extra) -> None:
     scene, cfg = job.scene, job.cfg
     shading = shading_of(scene)
     check_memory(scene, cfg)
-    if not todo:
+    if not len(todo):
         return
-    extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo[0][0]))
+    extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
     renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
 
     def write(path, result, row):

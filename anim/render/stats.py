@@ -11,21 +11,21 @@ from raycore.accelerators import packet_of
 from raycore.config import SHADOW_ACCEL, RenderConfig
 
 
-def write_stats(path: Path, scene, cfg, rows, run, file_of, frames) -> dict:
+def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
     """Merge this run into stats.json under a lock on its directory (two
     renders sharing a directory each add their frames): the earlier runs'
     frames whose files still exist, this run's, and the job's frames on disk
-    that no stats.json lists (written by a run that was killed), recovered
-    from their EXR headers. Written atomically."""
+    (on_disk(): {frame: path}) that no stats.json lists (written by a run
+    that was killed), recovered from their EXR headers. Written atomically."""
     fd = os.open(path.parent, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         previous = read_stats(path) or {"frames": [], "runs": []}
         previous["frames"] = [r for r in previous["frames"] if file_of(r["frame"]).exists()]
         listed = {r["frame"] for r in previous["frames"]} | {r["frame"] for r in rows}
-        for f in frames:
-            if f not in listed and file_of(f).exists():
-                row = recovered_row(file_of(f))
+        for f, frame_path in sorted(on_disk().items()):
+            if f not in listed:
+                row = recovered_row(frame_path)
                 if row is not None:
                     previous["frames"].append(row)
         stats = merged_stats(previous, scene, cfg, rows, run)
@@ -74,7 +74,19 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             **({"spp_cap": result.counters["spp_cap"],
                 "rays_left_out": result.counters["rays_left_out"],
                 "spp_mean": result.counters["adaptive_spp_mean"]} if "rays_left_out" in result.counters else {}),
+            # RGB values that half floats cannot hold (they are written as +inf)
+            **({"half_overflow": n_over} if (n_over := half_overflow(result.rgba)) else {}),
             "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
+
+
+# the smallest float32 that rounds to +inf in half precision (65504 is the largest half)
+HALF_INF_FROM = 65520.0
+
+
+def half_overflow(rgba) -> int:
+    """How many R, G, B values of a frame become +inf when stored as half."""
+    rgb = rgba[..., :3]
+    return int(np.count_nonzero(rgb >= HALF_INF_FROM)) if rgb.max(initial=0.0) >= HALF_INF_FROM else 0
 
 
 def frame_metadata(row: dict, version: str) -> dict:
