@@ -122,7 +122,8 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
     return _WORKER_SCENES[key]
 
 
-def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: str, version: str) -> list:
+def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: str, version: str,
+                 run_info: dict) -> list:
     """Run on a worker: [(frame, exr bytes, stats row)] of consecutive frames.
     An error names its frame."""
     from raycore._jit import set_threads
@@ -146,7 +147,7 @@ def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: st
             t0 = time.perf_counter()
             path = os.path.join(ws.directory.name, f"frame.{os.getpid()}.exr")
             write_exr(path, {"RGBA": result.rgba, "Z": result.z, **result.aovs},
-                      frame_metadata(row, version), compression)
+                      frame_metadata(row, version, run_info), compression)
             with open(path, "rb") as f:
                 data = f.read()
             os.remove(path)

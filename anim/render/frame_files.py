@@ -68,48 +68,59 @@ def existing_frames(scene, out_dir, frames) -> dict:
 
 class FramePlan:
     """The (frame, path) pairs a run renders, in frame order, made lazily:
-    the frames of the range that are not finished (--resume: whole frames of
-    this render are skipped; a truncated or foreign file is rendered again,
-    said through `warn`). Only the files that exist are looked at, so a
-    range of millions of frames is planned in the time of one directory
-    listing. Without --resume or --overwrite an existing frame is an error,
-    raised here, before any work."""
+    the frames of the range that are not finished. Only the files that
+    exist are looked at, so a range of millions of frames is planned in the
+    time of one directory listing. Without --resume or --overwrite an
+    existing frame is an error, raised here, before any work. With --resume
+    an existing frame is checked when the run reaches it (whole_frame: the
+    checksum stats.json recorded, `checksums`, or a full decode) and
+    skipped if whole, else rendered again, said through `warn`."""
 
-    def __init__(self, scene, out_dir, frames, resume, overwrite, cfg=None, warn=None):
+    def __init__(self, scene, out_dir, frames, resume, overwrite, cfg=None, warn=None, checksums=None):
         pattern = scene.spec.output.path
         if "#" not in pattern and len(frames) > 1:
             raise SceneError(scene.path, "output.path", "needs a run of '#' for the frame number when rendering several frames")
-        self.scene, self.out_dir, self.frames = scene, out_dir, frames
+        self.scene, self.out_dir, self.frames, self.cfg = scene, out_dir, frames, cfg
+        self.warn, self.checksums = warn, checksums or {}
         self.directory = frame_file(scene, out_dir, frames[0]).parent if len(frames) else None
-        self.finished, self.stale = set(), set()       # stale: existing files to be rendered again
-        existing = existing_frames(scene, out_dir, frames)
+        self.stale = set()                  # existing files to be rendered again
+        self.finished = set()               # existing frames checked whole
+        self.existing = existing_frames(scene, out_dir, frames)
         if overwrite:
-            self.stale = set(existing.values())
-            existing = {}
-        for f in sorted(existing):
-            path = existing[f]
-            if not resume:
-                raise SceneError(path, "", "frame exists; use --resume to skip finished frames or --overwrite to replace them")
-            problem = whole_frame(path, cfg.width, cfg.height, frame_channels(cfg)) if cfg else ""
-            if not problem:
-                self.finished.add(f)
-                continue
-            if warn:
-                warn(f"{path}: {problem}; rendering frame {f} again")
-            self.stale.add(path)
+            self.stale = set(self.existing.values())
+            self.existing = {}
+        elif self.existing and not resume:
+            path = self.existing[min(self.existing)]
+            raise SceneError(path, "", "frame exists; use --resume to skip finished frames or --overwrite to replace them")
+        self._first = None
+
+    def _finished(self, f) -> bool:
+        if f in self.finished:
+            return True
+        path = self.existing.pop(f, None)
+        if path is None:
+            return False
+        cfg = self.cfg
+        problem = whole_frame(path, cfg.width, cfg.height, frame_channels(cfg), self.checksums.get(f)) if cfg else ""
+        if not problem:
+            self.finished.add(f)
+            return True
+        if self.warn:
+            self.warn(f"{path}: {problem}; rendering frame {f} again")
+        self.stale.add(path)
+        return False
 
     def __iter__(self):
         for f in self.frames:
-            if f not in self.finished:
+            if not self._finished(f):
                 yield f, frame_file(self.scene, self.out_dir, f)
 
     def first(self):
-        """The first (frame, path) to render, or None."""
-        return next(iter(self), None)
+        """The first (frame, path) to render, or None (checks the frames before it)."""
+        if self._first is None:
+            self._first = next(iter(self), False)
+        return self._first or None
 
-    def __len__(self):
-        return len(self.frames) - len(self.finished)
 
-
-def plan_frames(scene, out_dir, frames, resume, overwrite, cfg=None, warn=None) -> FramePlan:
-    return FramePlan(scene, out_dir, frames, resume, overwrite, cfg, warn)
+def plan_frames(scene, out_dir, frames, resume, overwrite, cfg=None, warn=None, checksums=None) -> FramePlan:
+    return FramePlan(scene, out_dir, frames, resume, overwrite, cfg, warn, checksums)

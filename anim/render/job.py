@@ -9,20 +9,22 @@ overlap gains. Raise the constant on machines with cores to spare.
 """
 import os
 import time
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
+from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.image_io import temp_path, write_exr
 
 from .frame_files import existing_frames, frame_file, plan_frames
-from .output_dir import claim, release, remove_stale_temps
+from .output_dir import claim, file_crc32, release, remove_stale_temps
 from .paths import writable_dir, writable_file
 from .renderer import SceneRenderer, check_memory, warm_up
 from .settings import shading_of
-from .stats import frame_metadata, frame_row, settings_of, write_stats
+from .stats import frame_metadata, frame_row, read_stats, settings_of, stats_owner_problem, write_stats
 
 VERSION = "0.1.0"
 MAX_PENDING_WRITES = 0
@@ -58,9 +60,15 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     and SIGTERM, noted by the command line)."""
     scene, cfg = job.scene, job.cfg
     warn = warn or (lambda message: None)
-    todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn)
-    stale = todo.stale                   # existing files to be rendered again (not whole)
-    for directory in [todo.directory] if len(todo) else []:
+    previous = read_stats(job.stats_path)
+    problem = stats_owner_problem(previous, scene)
+    if problem:
+        raise SceneError(job.stats_path, "", problem)
+    checksums = {r["frame"]: r["crc32"] for r in (previous or {}).get("frames", [])
+                 if isinstance(r.get("crc32"), int)} if job.resume else {}
+    todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn, checksums)
+    stale = todo.stale                   # existing files to be rendered again (not whole), filled as checked
+    for directory in [todo.directory] if todo.first() is not None else []:
         writable_dir(directory, "frames")
         for name in remove_stale_temps(directory):
             warn(f"removed {directory / name}, left by a render that was killed")
@@ -90,12 +98,16 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         claimed.discard(path)        # released: a later claim on it is another render's
 
     wall0 = time.perf_counter()
+    started = time.strftime("%Y-%m-%dT%H:%M:%S")
+    # in every frame's header: a frame of a run killed before its stats were
+    # written brings its run back into stats.json (stats.recovered_runs)
+    run_info = {"started": started, **settings_of(cfg)}
     ended, extra = "complete", {"compile_s": 0.0}
     try:
         if client is None:
-            _render_here(job, todo, take, done, on_frame, should_stop, extra)
+            _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info)
         else:
-            extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client))
+            extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run_info))
     except BaseException as exc:
         ended = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"failed: {exc}"
         raise
@@ -105,8 +117,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         # the wall clock of the frames: the warm-up (compile) is reported apart;
         # on a cluster the workers' own warm-ups fall inside it
         wall_s = time.perf_counter() - wall0 - extra["compile_s"]
-        run = {"started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(time.time() - wall_s)),
-               "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
+        run = {"started": started, "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
                                 lambda f: frame_file(scene, job.out_dir, f),
@@ -119,13 +130,13 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     return stats
 
 
-def _render_here(job, todo, take, done, on_frame, should_stop, extra) -> None:
+def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info) -> None:
     """Frames in this process, written by a writer thread; the compile
     (warm-up) seconds go into extra["compile_s"] as soon as they are known."""
     scene, cfg = job.scene, job.cfg
     shading = shading_of(scene)
     check_memory(scene, cfg)
-    if not len(todo):
+    if todo.first() is None:
         return
     extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
     renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
@@ -134,11 +145,12 @@ def _render_here(job, todo, take, done, on_frame, should_stop, extra) -> None:
         t0 = time.perf_counter()
         channels = {"RGBA": result.rgba, "Z": result.z, **result.aovs}
         try:
-            write_exr(str(path), channels, frame_metadata(row, VERSION), scene.spec.output.compression)
+            write_exr(str(path), channels, frame_metadata(row, VERSION, run_info), scene.spec.output.compression)
         except OSError as exc:
             raise FrameWriteError(f"cannot write frame {row['frame']} to {path}: "
                                   f"{exc.strerror or exc}") from None
         row["write_ms"] = (time.perf_counter() - t0) * 1e3   # read only after the write ends
+        row["crc32"] = file_crc32(path)                      # what --resume compares (output_dir.whole_frame)
         done(path, row)
 
     with ThreadPoolExecutor(max_workers=1) as writer:
@@ -164,7 +176,7 @@ def _render_here(job, todo, take, done, on_frame, should_stop, extra) -> None:
             p.result()
 
 
-def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> dict:
+def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run_info) -> dict:
     """Frames on the client's cluster in chunks of consecutive frames; each
     frame comes back as EXR bytes and is written here, atomically. Returns
     the run's per-worker figures. A Ctrl-C (should_stop) or a failed task
@@ -181,7 +193,7 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> 
         return {"workers": {}}
     bundle = client.scatter(bundle_scene(scene), broadcast=True, hash=False)
     cfg_fields = dataclasses.asdict(cfg)
-    futures = [client.submit(render_chunk, bundle, cfg_fields, c, scene.spec.output.compression, VERSION,
+    futures = [client.submit(render_chunk, bundle, cfg_fields, c, scene.spec.output.compression, VERSION, run_info,
                              retries=TASK_RETRIES, pure=False)
                for c in chunks_of([f for f, _ in mine], max(1, job.chunk))]
     workers = {}
@@ -200,6 +212,7 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client) -> 
                 _write_bytes(path, data, frame)
                 row["write_ms"] = (time.perf_counter() - t0) * 1e3
                 row["bytes"] = len(data)
+                row["crc32"] = zlib.crc32(data)
                 compile_s = row.pop("worker_compile_s")
                 w = workers.setdefault(row["worker"], {"compile_s": compile_s, "frames": 0, "busy_ms": 0.0})
                 w["frames"] += 1

@@ -23,11 +23,11 @@ def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
         previous = read_stats(path) or {"frames": [], "runs": []}
         previous["frames"] = [r for r in previous["frames"] if file_of(r["frame"]).exists()]
         listed = {r["frame"] for r in previous["frames"]} | {r["frame"] for r in rows}
-        for f, frame_path in sorted(on_disk().items()):
-            if f not in listed:
-                row = recovered_row(frame_path)
-                if row is not None:
-                    previous["frames"].append(row)
+        recovered = [row for f, frame_path in sorted(on_disk().items()) if f not in listed
+                     for row in [recovered_row(frame_path)] if row is not None]
+        previous["runs"] = [r for r in previous.get("runs", []) if isinstance(r, dict)]
+        recovered_runs(previous["runs"], recovered)
+        previous["frames"] += recovered
         stats = merged_stats(previous, scene, cfg, rows, run)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(stats, indent=1))
@@ -46,13 +46,34 @@ def recovered_row(path: Path):
         return None
     try:
         row = json.loads(inp.spec().getattribute("frustrace:stats") or "null")
+        run = json.loads(inp.spec().getattribute("frustrace:run") or "null")
     except ValueError:
-        row = None
+        row = run = None
     finally:
         inp.close()
     if not isinstance(row, dict) or not all(isinstance(row.get(k), (int, float)) for k in PHASE_KEYS):
         return None
-    return {**row, "recovered": True}
+    # the header was written before the write ended: its write time is unknown
+    return {**row, "write_ms": None, "recovered": True,
+            **({"run_info": run} if isinstance(run, dict) else {})}
+
+
+def recovered_runs(runs: list, recovered: list) -> None:
+    """Give the recovered rows (recovered_row) their run: a run whose
+    frames are on disk but which never wrote stats.json (it was killed) is
+    listed as ended "killed", with its start and settings from the frames'
+    headers and the number of its frames found."""
+    by_start = {}
+    for row in recovered:
+        info = row.pop("run_info", None)
+        if info is None:
+            continue
+        key = json.dumps(info, sort_keys=True)
+        if key not in by_start:
+            by_start[key] = len(runs)
+            runs.append({**info, "frames_rendered": 0, "ended": "killed", "recovered": True})
+        row["run"] = by_start[key]
+        runs[row["run"]]["frames_rendered"] += 1
 
 
 def frame_row(scene, frame, t, interp_ms, result) -> dict:
@@ -89,8 +110,9 @@ def half_overflow(rgba) -> int:
     return int(np.count_nonzero(rgb >= HALF_INF_FROM)) if rgb.max(initial=0.0) >= HALF_INF_FROM else 0
 
 
-def frame_metadata(row: dict, version: str) -> dict:
-    """The EXR header attributes of a frame (both paths write the same)."""
+def frame_metadata(row: dict, version: str, run_info: dict) -> dict:
+    """The EXR header attributes of a frame (both paths write the same);
+    run_info: the run's start and settings, for stats.recovered_runs."""
     meta = {"frustrace:frame": int(row["frame"]), "frustrace:time": float(row["time"]),
             "Software": f"frustrace {version}"}
     for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"):
@@ -98,6 +120,7 @@ def frame_metadata(row: dict, version: str) -> dict:
     # the whole row: a frame written by a run that was then killed still gets
     # its line in stats.json (stats.recovered_row) when a later run ends
     meta["frustrace:stats"] = json.dumps(row)
+    meta["frustrace:run"] = json.dumps(run_info)
     return meta
 
 
@@ -127,7 +150,8 @@ def read_stats(path: Path):
     frames = stats.get("frames") if isinstance(stats, dict) else None
     ok = isinstance(frames, list) and all(
         isinstance(r, dict) and isinstance(r.get("frame"), int)
-        and all(isinstance(r.get(k), (int, float)) for k in PHASE_KEYS) for r in frames)
+        and all(isinstance(r.get(k), (int, float)) or (k == "write_ms" and r.get("recovered") and r.get(k) is None)
+                for k in PHASE_KEYS) for r in frames)
     return stats if ok else None
 
 
@@ -142,13 +166,16 @@ def merged_stats(previous, scene, cfg, rows, run) -> dict:
     merged = [frames[k] for k in sorted(frames)]
     summary = summarize(merged, run["wall_s"], run["compile_s"])
     summary["fps_wall"] = len(rows) / run["wall_s"] if rows and run["wall_s"] > 0 else 0.0
-    return {"scene": scene.path.name, "resolution": [cfg.width, cfg.height], **settings_of(cfg),
+    return {"scene": scene.path.name, "scene_file": str(Path(scene.path).resolve()), "resolution": [cfg.width, cfg.height], **settings_of(cfg),
             "frames": merged, "runs": runs + [run], "summary": summary}
 
 
 def median_ms(rows, *keys) -> float:
-    """Median over frames of the sum of the given phase timings (0 if none)."""
-    return float(np.median([sum(r[k] for k in keys) for r in rows])) if rows else 0.0
+    """Median over frames of the sum of the given phase timings (0 if none),
+    over the frames that measured them all (a recovered frame's write_ms is
+    unknown, None)."""
+    sums = [sum(r[k] for k in keys) for r in rows if all(r.get(k) is not None for k in keys)]
+    return float(np.median(sums)) if sums else 0.0
 
 
 def fps_of(rows):
@@ -165,3 +192,21 @@ def summarize(rows, wall_s, compile_s) -> dict:
             "fps_wall": len(rows) / wall_s if rows and wall_s > 0 else 0.0,
             "compile_s": compile_s,
             "median_ms": {k: median_ms(rows, k) for k in PHASE_KEYS}}
+
+
+def stats_owner_problem(previous, scene):
+    """Why an existing stats.json may not take this scene's frames ('' if it
+    may): it belongs to another scene file. Two scenes in one stats.json
+    kept one frame 0 and switched its `scene` silently (issue 20)."""
+    if not previous:
+        return ""
+    mine = str(Path(scene.path).resolve())
+    theirs = previous.get("scene_file")
+    if theirs is None:                  # written before scene_file was recorded
+        same = previous.get("scene") == scene.path.name
+    else:
+        same = theirs == mine
+    if same:
+        return ""
+    return (f"holds the stats of another scene ({theirs or previous.get('scene')}); render {scene.path.name} "
+            "into another directory, or give it its own --stats PATH")
