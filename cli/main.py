@@ -251,6 +251,14 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
         n_threads = 0                      # each worker: all of its machine's cores
     width, height = res if res else (None, None)
     structure = accel or spec.render.accel
+    if not (workers or scheduler):
+        ctx = click.get_current_context()
+        given = [name for name, param in (("--chunk", "chunk"), ("--tls-ca", "tls_ca"), ("--tls-cert", "tls_cert"),
+                                          ("--tls-key", "tls_key"))
+                 if ctx.get_parameter_source(param) not in (None, click.core.ParameterSource.DEFAULT)]
+        if given:
+            click.echo(f"frustrace: warning: {', '.join(given)} {'is' if len(given) == 1 else 'are'} for "
+                       "--workers or --scheduler; this render runs in this process", err=True)
     if packet and structure != "grid":
         from raycore.accelerators import packet_of
         side = packet_of(structure, int(packet))
@@ -317,7 +325,8 @@ def _int_list(text, name, allowed=None):
 
 @main.command()
 @click.option("--scene", "scenes", default="all", show_default=True,
-              help="Built-in scenes, comma-separated, or 'all': demo, hand, runner, toys, marbles, fairy, torus.")
+              help="Built-in scenes or scene files (anim.yaml), comma-separated, or 'all': demo, hand, runner, "
+                   "toys, marbles, fairy, torus.")
 @click.option("--res", type=click.IntRange(16, 8192), help="Image size N (NxN); default 1024, and 192 for the "
                                                            "image error study of --error.")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
@@ -330,9 +339,12 @@ def _int_list(text, name, allowed=None):
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the rows as JSON (with --error: the error report).")
 @click.option("--error", "error_report", is_flag=True,
-              help="Instead of fps: interpolation error against run time for every method and key "
-                   "spacing on the scenes that know their exact motion, plus a bouncing-ball stiff case; "
-                   "prints measured convergence orders and writes a JSON and a log-log plot.")
+              help="Instead of fps, three studies of error against run time (minutes at the defaults; "
+                   "a line per step): interpolation error for every method and key spacing on the built-in "
+                   "scenes that know their exact motion, plus a bouncing-ball stiff case; image error of spp, "
+                   "the error budget and area-light samples against a 256-spp reference at --res (default "
+                   "192); float precision against float64. Prints tables, writes a JSON and a log-log plot. "
+                   "Quick variant: --scene demo --res 64.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               help="A PNG: stacked bars of median ms per phase (interp, build, trace, shade, shadow, "
                    "write) per scene; with --error, the error plot (default interp_error.png; the JSON "
@@ -354,9 +366,16 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
     from .report import bench_table
     res = res if res else (None if error_report else 1024)
     names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
-    unknown = [n for n in names if n not in SCENE_NAMES]
+    if not names:
+        raise click.BadParameter(f"no scene given; built-in: {', '.join(SCENE_NAMES)}, or a scene file",
+                                 param_hint="--scene")
+    unknown = [n for n in names if n not in SCENE_NAMES and not Path(n).is_file()]
     if unknown:
-        raise click.BadParameter(f"unknown scene {unknown[0]!r}; built-in: {', '.join(SCENE_NAMES)}", param_hint="--scene")
+        raise click.BadParameter(f"unknown scene {unknown[0]!r} (not built-in, not a file); built-in: "
+                                 f"{', '.join(SCENE_NAMES)}", param_hint="--scene")
+    for n in names:
+        if n not in SCENE_NAMES:
+            load_scene(n)                 # a scene file's mistakes: one line, exit 2, before any work
     if json_path:
         writable_file(json_path, "the --json file")
     if plot_path:
@@ -368,7 +387,8 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
         from .error_bench import print_report, write_report
         plot_path = writable_file(plot_path or Path("interp_error.png"), "the --plot image", PLOT_FORMATS)
         json_path = writable_file(json_path or plot_path.with_suffix(".json"), "the --json file")
-        report = run_error_report(names, res or IMAGE_STUDY_RES)
+        report = run_error_report(names, res or IMAGE_STUDY_RES,
+                                  say=lambda text: click.echo(f"bench --error: {text}", err=True))
         if not report["scenes"]:
             raise click.BadParameter("none of these scenes knows its exact motion", param_hint="--scene")
         print_report(report)
@@ -439,6 +459,10 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
             path = scene_file(scene_name, Path(tmp))
         result = run_compare(Path(path), names, n_frames, res, n_threads, label=scene_name or str(path))
     result["threads"] = n_threads
+    timed = result["rows"][0]["frames"]
+    if timed < n_frames:
+        click.echo(f"frustrace: warning: --frames {n_frames}, but the scene has {timed} frame"
+                   f"{'s' if timed != 1 else ''}: {timed} timed", err=True)
     compare_table(result)
     if json_path:
         json_path.write_text(json.dumps(result, indent=1))

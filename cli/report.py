@@ -1,5 +1,6 @@
 """Progress bar and the per-phase summary table (rich)."""
 import contextlib
+import os
 
 from rich.console import Console as RichConsole
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -32,6 +33,33 @@ def progress(n_frames, show):
         yield on_frame
 
 
+def fitted_table(title, columns, rows, width) -> Table:
+    """A table that fits `width` columns without cutting a cell: every
+    column is at least as wide as its widest cell (headers fold at spaces),
+    and while the table is too wide the columns with the lowest keep rank
+    are left out (rank None: always kept), said in the caption. rich alone
+    shrank cells to "de…" and numbers to "0.…" (issue 20).
+    columns: [(header, rank)]; rows: lists of cell strings."""
+    natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]
+    need = [max([len(w) for w in h.split()] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]
+    keep = list(range(len(columns)))
+    if sum(w + 3 for w in natural) + 1 <= width:
+        need = natural                   # room for every header on one line
+    dropped = []
+    droppable = sorted((rank, i) for i, (_, rank) in enumerate(columns) if rank is not None)
+    while sum(need[i] + 3 for i in keep) + 1 > width and droppable:
+        _, i = droppable.pop(0)
+        keep.remove(i)
+        dropped.append(columns[i][0])
+    table = Table(title=title, caption=(f"narrow terminal: {', '.join(dropped)} left out (a wider terminal "
+                                        "or --json shows them)") if dropped else None)
+    for i in keep:
+        table.add_column(columns[i][0], justify="right", width=need[i], overflow="fold")
+    for r in rows:
+        table.add_row(*(r[i] for i in keep))
+    return table
+
+
 def summary_table(stats):
     s = stats["summary"]
     med = s["median_ms"]
@@ -47,34 +75,37 @@ def summary_table(stats):
                   f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps)")
 
 
-def bench_table(rows):
+def bench_table(rows, console=None):
     """One line per scene and packet size (and peer); the fastest fps_raycast
     per scene marked; with peers, frustrace's fps_full over the best peer's."""
-    table = Table(title="frustrace bench (median ms per frame; compile time excluded)")
     with_peers = any("vs_best_peer" in r for r in rows)
-    for col in ("scene", "accel", "shadows", "tris", "res", "packet", "threads", "interp", "build", "trace", "shade",
-                "shadow", "write", "fps_raycast", "fps_full", "Mrays/s", "shadow Mrays/s", "tests/ray",
-                *(["full / best peer"] if with_peers else [])):
-        table.add_column(col, justify="right")
+    # (header, keep rank: the lowest goes first on a narrow terminal; None = always)
+    columns = [("scene", None), ("accel", None), ("shadows", 9), ("tris", 3), ("res", 2), ("packet", 8),
+               ("threads", 1), ("interp", 4), ("build", 6), ("trace", None), ("shade", None), ("shadow", None),
+               ("write", 5), ("fps_raycast", 10), ("fps_full", None), ("Mrays/s", 11), ("shadow Mrays/s", 7),
+               ("tests/ray", 0), *([("full / best peer", None)] if with_peers else [])]
     best = {}
     for r in rows:
         if r["fps_raycast"] > best.get(r["scene"], (0, None))[0]:
             best[r["scene"]] = (r["fps_raycast"], (r["accel"], r.get("shadow_accel"), r["packet"]))
+    cells = []
     for r in rows:
         mark = " *" if best[r["scene"]][1] == (r["accel"], r.get("shadow_accel"), r["packet"]) else ""
         peer = r.get("peer", False)
         ratio = [f"{r['vs_best_peer']:.2f}x" if "vs_best_peer" in r else "-"] if with_peers else []
-        table.add_row(r["scene"], r["accel"], r.get("shadow_accel", "-"), str(r["triangles"]), str(r["resolution"]),
+        cells.append([r["scene"], r["accel"], r.get("shadow_accel", "-"), str(r["triangles"]), str(r["resolution"]),
                       ("-" if peer else str(r["packet"])) + mark,
                       str(r["threads"]), f"{r['interp_ms']:.2f}", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
                       f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}", f"{r['write_ms']:.1f}",
                       f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}", f"{r['mrays_per_s']:.1f}",
                       f"{r['shadow_mrays_per_s']:.1f}",
-                      "-" if peer else f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}", *ratio)
-    console = Console()
-    if not console.is_terminal:
-        console = Console(width=210)      # a pipe or file gets the whole table
-    console.print(table)
+                      "-" if peer else f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}", *ratio])
+    if console is None:
+        console = Console()
+        if not console.is_terminal and "COLUMNS" not in os.environ:
+            console = Console(width=210)  # a pipe or file gets the whole table
+    console.print(fitted_table("frustrace bench (median ms per frame; compile time excluded)", columns, cells,
+                               console.width))
     bvh = [r for r in rows if "bvh_build_ms" in r]
     for r in bvh:
         console.print(f"{r['scene']}: BVH build {r['bvh_build_ms']:.2f} ms ({r['bvh_build_ms_per_100k']:.2f} "
@@ -86,24 +117,25 @@ def bench_table(rows):
                       "(shade 0) and rays made before the clock starts, both in their favour")
 
 
-def compare_table(result):
+def compare_table(result, console=None):
     """One row per structure, then the image differences against the first."""
     rows = result["rows"]
     r0 = rows[0]
-    table = Table(title=f"frustrace compare: {result['scene']}  {r0['triangles']} triangles  "
-                        f"{r0['resolution'][0]}x{r0['resolution'][1]}  {r0['frames']} frames  "
-                        f"{result.get('threads', '?')} threads "
-                        "(medians per frame)")
-    for col in ("structure", "packet", "build ms", "trace ms", "shadow ms", "fps_raycast", "fps_full",
-                "primary tests", "all tests", "cells/nodes per packet", "published tests"):
-        table.add_column(col, justify="right")
+    title = (f"frustrace compare: {result['scene']}  {r0['triangles']} triangles  "
+             f"{r0['resolution'][0]}x{r0['resolution'][1]}  {r0['frames']} frames  "
+             f"{result.get('threads', '?')} threads (medians per frame)")
+    columns = [("structure", None), ("packet", 3), ("build ms", None), ("trace ms", None), ("shadow ms", None),
+               ("fps_raycast", None), ("fps_full", None), ("primary tests", 4), ("all tests", 2),
+               ("cells/nodes per packet", 1), ("published tests", 0)]
+    cells = []
     for r in rows:
         pub = f"{r['published_tests'] / 1e6:.2f}M" if r["published_tests"] else "-"
-        table.add_row(r["structure"], f"{r['packet']}²", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}", f"{r['shadow_ms']:.1f}",
-                      f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}", f"{r['primary_tests'] / 1e6:.2f}M",
-                      f"{r['tri_tests'] / 1e6:.1f}M", f"{r['visits_per_packet']:.1f}", pub)
-    console = Console() if Console().is_terminal else Console(width=170)
-    console.print(table)
+        cells.append([r["structure"], f"{r['packet']}²", f"{r['build_ms']:.2f}", f"{r['trace_ms']:.1f}",
+                      f"{r['shadow_ms']:.1f}", f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}",
+                      f"{r['primary_tests'] / 1e6:.2f}M", f"{r['tri_tests'] / 1e6:.1f}M",
+                      f"{r['visits_per_packet']:.1f}", pub])
+    console = console or (Console() if Console().is_terminal or "COLUMNS" in os.environ else Console(width=170))
+    console.print(fitted_table(title, columns, cells, console.width))
     for d in result["diff"]:
         console.print(f"{d['b']} vs {d['a']}: {d['hit_mismatch_pixels']} pixels hit/miss differ, "
                       f"depth max rel diff {d['max_rel_depth_diff']:.2e} "

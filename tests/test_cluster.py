@@ -267,3 +267,94 @@ def test_a_task_that_raises_names_its_frame_and_keeps_the_frames_before(tmp_path
     stats = json.loads((tmp_path / "stats.json").read_text())
     assert [r["frame"] for r in stats["frames"]] == [0, 1, 2, 3]
     assert stats["runs"][-1]["ended"].startswith("failed: frame 4")
+
+
+@pytest.mark.parametrize("content, words", [
+    (None, ["not found"]), ("nope", ["is not JSON"]), ('{"x": 1}', ['has no "address"']),
+])
+def test_a_bad_scheduler_file_is_named_in_one_line(tmp_path, content, words):
+    """Issue 20: AssertionError (empty) for a file that is not JSON or has
+    no address, "missing port number" for a missing file."""
+    path = tmp_path / "scheduler.json"
+    if content is not None:
+        path.write_text(content)
+    code, text = run("render", DEMO, "-o", tmp_path / "x", "--scheduler", path, *ARGS, timeout=120)
+    lines = text.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and str(path) in lines[0] and all(w in lines[0] for w in words), text
+
+
+@pytest.mark.parametrize("reply", [b"", b"\xff" * 64 + b"HTTP/1.0 200 OK\r\n\r\n"], ids=["silent", "garbage"])
+def test_a_port_that_is_not_a_scheduler_is_one_line_within_the_timeout(tmp_path, reply):
+    """Issue 20: a port that answers but is not a Dask scheduler (a
+    dashboard's) hung until Ctrl-C; one that answered oddly gave an
+    internal error allocating exabytes."""
+    import socket
+    import threading
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    held = []
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            held.append(conn)                     # kept open, answering nothing more
+            if reply:
+                conn.sendall(reply)
+    threading.Thread(target=serve, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    t0 = time.monotonic()
+    try:
+        code, text = run("render", DEMO, "-o", tmp_path / "x", "--scheduler", address, *ARGS, timeout=120)
+    finally:
+        server.close()
+        for c in held:
+            c.close()
+    lines = text.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and address in lines[0] and "internal error" not in text, text
+    assert time.monotonic() - t0 < 40
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_scheduler_without_workers_is_one_line_after_the_wait(tmp_path):
+    """Issue 20: `internal error: TimeoutError: No valid workers found`, exit 1."""
+    sched = subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                              "--scheduler-file", str(tmp_path / "s.json")], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "s.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        env = {**os.environ, "FRUSTRACE_WORKER_WAIT_S": "3"}
+        proc = frustrace("render", DEMO, "-o", tmp_path / "x", "--scheduler", tmp_path / "s.json", *ARGS, env=env)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        sched.kill()
+        sched.wait(timeout=30)
+    lines = (out + err).strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and "has no workers" in lines[0] and "waited 3 s" in lines[0], err
+
+
+def test_ctrl_c_to_the_whole_process_group_prints_one_line(tmp_path):
+    """Issue 20: a terminal's Ctrl-C reaches the workers too, and one of
+    them printed a 29-line traceback before the render's line: the embedded
+    cluster's workers now ignore SIGINT and are stopped by the render."""
+    out = tmp_path / "cancel"
+    proc = frustrace("render", DEMO, "-o", out, "--frames", "0:119", "--workers", "2", "--chunk", "1", *ARGS,
+                     start_new_session=True)
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline and proc.poll() is None and len(frames_in(out) if out.exists() else []) < 2:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("frustrace: interrupted"), err
+
+
+def test_cluster_options_without_a_cluster_are_warned(tmp_path):
+    code, text = run("render", DEMO, "-o", tmp_path / "x", "--frames", "0:0", "--chunk", "3", *ARGS)
+    assert code == 0 and "--chunk is for --workers or --scheduler" in text

@@ -394,3 +394,21 @@ def test_a_second_scene_into_the_same_stats_is_refused_with_the_owner_named(tmp_
     res = CliRunner().invoke(main, ["render", str(other), "-o", str(out), "--frames", "0:0", "--res", "24x16", "-q",
                                     "--stats", str(tmp_path / "other-stats.json")])
     assert res.exit_code == 0 and (out / "other_0000.exr").exists()
+
+
+def test_many_stale_claims_are_one_warning(tmp_path):
+    """Issue 20: resume after a killed --workers render printed one warning
+    per stale claim (18 lines)."""
+    import socket
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    for f in range(6):
+        (out / f".frame_{f:04d}.exr.claim").write_text(f"{socket.gethostname()} {dead.pid} 0\n")
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(out), "--frames", "0:5", "--res", "24x16",
+                                    "-q", "--resume"])
+    assert res.exit_code == 0, res.output
+    warned = [line for line in res.output.splitlines() if "removed" in line]
+    assert len(warned) == 1 and "6 claims" in warned[0], res.output
+    assert leftovers(out) == [] and len(exr_frames(out)) == 6

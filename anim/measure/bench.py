@@ -28,7 +28,9 @@ SCENE_NAMES = tuple(builtin.ALL)
 
 def scene_file(name: str, workdir: Path) -> Path:
     """A built-in scene's anim.yaml written into workdir/name (generated, or
-    the demo's shipped files copied)."""
+    the demo's shipped files copied), or a user's scene file as it is."""
+    if name not in builtin.ALL and Path(name).is_file():
+        return Path(name)
     if name not in builtin.ALL:
         raise SceneError("--scene", "", f"unknown scene {name!r}; built-in: {', '.join(SCENE_NAMES)}")
     return builtin.get(name).write(workdir / name)
@@ -47,7 +49,7 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
-    for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up
+    for i, frame in enumerate([frames[0], *frames]):       # first pass = warm-up
         interp_ms, result = renderer.render(scene.time_of(frame))
         t0 = time.perf_counter()
         if workdir is not None:          # the frame's EXR, as `render` writes it
@@ -118,7 +120,7 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
     lights = shading_of(scene).lights
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
-    for i, frame in enumerate([frames[0]] + frames):       # first pass = warm-up
+    for i, frame in enumerate([frames[0], *frames]):       # first pass = warm-up
         t = scene.time_of(frame)
         timings, depth = peer_frame(peer, scene.vertices_at(t), scene.faces,
                                     CameraPose(*scene.camera_at(t)), res, res, lights)
@@ -140,18 +142,19 @@ def run_bench(names, res, n_frames, packets, threads, accels=("grid",), peers=()
         paths = {n: scene_file(n, Path(tmp)) for n in names}
         rows = []
         for n in names:
+            label = n if n in builtin.ALL else Path(n).name      # a scene file: by its name
             depth = []
             for accel in accels:      # the kd-tree's and the BVH's packets are always 8x8
                 for p in (packets if accel == "grid" else packets[:1]):
                     for shadow in shadow_accels:
-                        rows.append(bench_scene(paths[n], n, res, n_frames, p, threads, accel, Path(tmp),
+                        rows.append(bench_scene(paths[n], label, res, n_frames, p, threads, accel, Path(tmp),
                                                 depth, shadow))
-            peer_rows = [bench_peer(peer, paths[n], n, res, n_frames, threads, rows[-1]["interp_ms"],
+            peer_rows = [bench_peer(peer, paths[n], label, res, n_frames, threads, rows[-1]["interp_ms"],
                                     depth[0]) for peer in peers]
             best = max((r["fps_full"] for r in peer_rows), default=0.0)
             if best > 0:
                 for r in rows:
-                    if r["scene"] == n:
+                    if r["scene"] == label:
                         r["vs_best_peer"] = r["fps_full"] / best
             rows += peer_rows
         return rows

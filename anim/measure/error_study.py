@@ -44,14 +44,16 @@ def eval_times(n, period):
     return period * ((0.5 + np.arange(n) * 0.6180339887498949) % 1.0)
 
 
-def run_error_report(names, image_res=None):
+def run_error_report(names, image_res=None, say=None):
     """{'scenes': {name: measure(...)}, 'bounce': rows, 'image': ..., 'precision':
     ...} for scenes with exact motion; the image study at image_res pixels
-    square (default image_error.RES)."""
+    square (default image_error.RES). say(text): a progress line per step."""
+    say = say or (lambda text: None)
     scenes = {}
     for name in names:
         if name not in builtin.SCENES:
             continue
+        say(f"interpolation error: {name}")
         gen = builtin.get(name)
         n_moving = gen.exact_moving(0.0).shape[0]
         pick = np.linspace(0, n_moving - 1, min(n_moving, MAX_VERTICES)).astype(int)
@@ -63,9 +65,13 @@ def run_error_report(names, image_res=None):
         result["moving_vertices"] = int(n_moving)
         result["shipped"] = shipped_error(gen)
         scenes[name] = result
+    say("interpolation error: the bouncing ball")
+    bounce = bounce_overshoot()
+    say(f"image error: spp, the error budget and area-light samples at {image_res or RES}^2")
+    image = run_image_study(names, image_res or RES)
+    say("float precision")
     return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
-            "bounce": bounce_overshoot(), "image": run_image_study(names, image_res or RES),
-            "precision": run_precision_study(names)}
+            "bounce": bounce, "image": image, "precision": run_precision_study(names)}
 
 
 def run_precision_study(names):

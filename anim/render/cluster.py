@@ -13,9 +13,11 @@ retries a chunk whose worker died elsewhere; its frames reach the client
 only when the whole chunk is done, so none is written twice.
 """
 import hashlib
+import json
 import os
 import socket
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -25,6 +27,8 @@ from anim.errors import SceneError
 # the worker's scenes: bundle digest -> WorkerScene (kept between tasks)
 _WORKER_SCENES = {}
 CONNECT_TIMEOUT_S = 10
+# how long a scheduler without workers is given to get one (FRUSTRACE_WORKER_WAIT_S)
+WORKER_WAIT_S = float(os.environ.get("FRUSTRACE_WORKER_WAIT_S", "30"))
 TASK_RETRIES = 3
 
 
@@ -187,31 +191,89 @@ def security_of(tls_ca=None, tls_cert=None, tls_key=None):
                     require_encryption=True)
 
 
+def scheduler_address(scheduler: str) -> str:
+    """The address behind --scheduler: itself, or the `address` of a
+    scheduler file (a name ending in .json, or one that exists); a file
+    that is missing, not JSON or without an address is named (SceneError)."""
+    looks_like_file = scheduler.endswith(".json") or ("://" not in scheduler and Path(scheduler).exists())
+    if not looks_like_file:
+        return scheduler
+    path = Path(scheduler)
+    try:
+        info = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise SceneError("--scheduler", "", f"scheduler file {scheduler} not found") from None
+    except OSError as exc:
+        raise SceneError("--scheduler", "", f"cannot read scheduler file {scheduler}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise SceneError("--scheduler", "", f"scheduler file {scheduler} is not JSON ({exc})") from None
+    address = info.get("address") if isinstance(info, dict) else None
+    if not isinstance(address, str) or not address:
+        raise SceneError("--scheduler", "", f"scheduler file {scheduler} has no \"address\" (is it the file "
+                                            "`dask scheduler --scheduler-file` wrote?)")
+    return address
+
+
 def connect(scheduler=None, workers=None, security=None):
     """(client, cluster or None): an embedded LocalCluster of `workers`
     processes listening on 127.0.0.1 only, or a connection to `scheduler`
-    (SceneError, exit 2, naming the address if it cannot be reached within
-    CONNECT_TIMEOUT_S)."""
+    (an address or a scheduler file). Whatever the other end does, the
+    answer comes within CONNECT_TIMEOUT_S: a port that answers
+    but is not a Dask scheduler (a dashboard's HTTP) made Dask's handshake
+    wait forever, and one that answered with other bytes made it allocate
+    exabytes; both are one line and exit 2 (SceneError, naming the address)."""
     import logging
+    import signal
 
     from distributed import Client, LocalCluster
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+        # the workers ignore Ctrl-C: the terminal sends it to the whole process
+        # group, and a worker that took it printed its own traceback before
+        # the render's one line; this process stops them when it ends
+        main_thread = threading.current_thread() is threading.main_thread()
+        before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        try:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGINT, before)
         return Client(cluster), cluster
-    kwargs = {"timeout": CONNECT_TIMEOUT_S}
+    address = scheduler_address(scheduler)
+    kwargs = {"timeout": CONNECT_TIMEOUT_S - 2}          # Dask's own error first, if it has one
     if security is not None:
         kwargs["security"] = security
-    try:
-        if scheduler.endswith(".json") and Path(scheduler).is_file():
-            return Client(scheduler_file=scheduler, **kwargs), None
-        return Client(scheduler, **kwargs), None
-    except TypeError as exc:         # tls:// without certificates: Dask has no SSL context
-        if "ssl" not in str(exc).lower():
-            raise
-        raise SceneError("--scheduler", "", f"{scheduler} needs TLS certificates: give --tls-ca, "
+    result = {}
+
+    def attempt():
+        try:
+            result["client"] = Client(address, **kwargs)
+        except BaseException as exc:          # handed to the caller below
+            result["error"] = exc
+    thread = threading.Thread(target=attempt, daemon=True, name="frustrace-connect")
+    thread.start()
+    thread.join(CONNECT_TIMEOUT_S)
+    if thread.is_alive():
+        raise SceneError("--scheduler", "", f"no Dask scheduler answered at {address} within "
+                                            f"{CONNECT_TIMEOUT_S} s (something listens there: a dashboard's "
+                                            "port? the scheduler's is 8786 by default)") from None
+    exc = result.get("error")
+    if exc is None:
+        client = result["client"]
+        try:
+            client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+        except TimeoutError:
+            client.close()
+            raise SceneError("--scheduler", "", f"the scheduler at {address} has no workers (waited "
+                                                f"{WORKER_WAIT_S:g} s; start one with `dask worker {address}`)") from None
+        return client, None
+    if isinstance(exc, TypeError) and "ssl" in str(exc).lower():   # tls:// without certificates
+        raise SceneError("--scheduler", "", f"{address} needs TLS certificates: give --tls-ca, "
                                             "--tls-cert and --tls-key (or set them in Dask's configuration)") from None
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise SceneError("--scheduler", "", f"cannot reach the Dask scheduler at {scheduler}: "
+    if isinstance(exc, MemoryError):
+        raise SceneError("--scheduler", "", f"{address} answered, but not as a Dask scheduler does") from None
+    if isinstance(exc, (OSError, TimeoutError, ValueError, AssertionError)):
+        raise SceneError("--scheduler", "", f"cannot reach the Dask scheduler at {address}: "
                                             f"{type(exc).__name__}: {exc}".splitlines()[0]) from None
+    raise exc

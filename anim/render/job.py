@@ -70,8 +70,12 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     stale = todo.stale                   # existing files to be rendered again (not whole), filled as checked
     for directory in [todo.directory] if todo.first() is not None else []:
         writable_dir(directory, "frames")
-        for name in remove_stale_temps(directory):
-            warn(f"removed {directory / name}, left by a render that was killed")
+        removed = remove_stale_temps(directory)
+        if len(removed) == 1:
+            warn(f"removed {directory / removed[0]}, left by a render that was killed")
+        elif removed:                    # one line, however many claims a killed cluster render left
+            warn(f"removed {len(removed)} claims and temporary files in {directory}, left by a render "
+                 f"that was killed ({', '.join(sorted(removed)[:3])}, ...)")
     writable_file(job.stats_path, "stats.json")
     rows, claimed = [], set()          # claimed: frames this run holds a claim on
 
