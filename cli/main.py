@@ -344,7 +344,10 @@ def _int_list(text, name, allowed=None):
                    "scenes that know their exact motion, plus a bouncing-ball stiff case; image error of spp, "
                    "the error budget and area-light samples against a 256-spp reference at --res (default "
                    "192); float precision against float64. Prints tables, writes a JSON and a log-log plot. "
-                   "Quick variant: --scene demo --res 64.")
+                   "Quick variant: --quick --scene torus --res 64.")
+@click.option("--quick", is_flag=True,
+              help="With --error: fewer key spacings, samples, budgets and precision cases and a 64-spp "
+                   "reference: the same tables in a fraction of the time.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
               help="A PNG: stacked bars of median ms per phase (interp, build, trace, shade, shadow, "
                    "write) per scene; with --error, the error plot (default interp_error.png; the JSON "
@@ -354,7 +357,8 @@ def _int_list(text, name, allowed=None):
                    "are installed (embreex, Open3D, Mitsuba 3: pip install 'frustrace[peers]'), "
                    "rebuilt every frame, one shadow ray per hit and light; adds their rows and "
                    "frustrace's fps_full over the best peer's.")
-def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_path, error_report, plot_path, peers):
+def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_path, error_report, quick, plot_path,
+          peers):
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
@@ -385,10 +389,14 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
         from anim.measure.image_error import RES as IMAGE_STUDY_RES
 
         from .error_bench import print_report, write_report
+        from anim import builtin
+        if not any(n in builtin.SCENES for n in names):     # before minutes of work, not after
+            raise click.BadParameter(f"none of these scenes knows its exact motion; --error takes "
+                                     f"{', '.join(builtin.SCENES)}", param_hint="--scene")
         plot_path = writable_file(plot_path or Path("interp_error.png"), "the --plot image", PLOT_FORMATS)
         json_path = writable_file(json_path or plot_path.with_suffix(".json"), "the --json file")
         report = run_error_report(names, res or IMAGE_STUDY_RES,
-                                  say=lambda text: click.echo(f"bench --error: {text}", err=True))
+                                  say=lambda text: click.echo(f"bench --error: {text}", err=True), quick=quick)
         if not report["scenes"]:
             raise click.BadParameter("none of these scenes knows its exact motion", param_hint="--scene")
         print_report(report)

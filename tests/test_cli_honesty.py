@@ -120,4 +120,6 @@ def test_bench_and_compare_say_what_they_did(tmp_path):
     res = CliRunner().invoke(main, ["compare", "grid", "vs", "bvh", str(one), "--frames", "2", "--res", "32"])
     assert res.exit_code == 0 and "the scene has 1 frame: 1 timed" in res.output, res.output
     helptext = " ".join(CliRunner().invoke(main, ["bench", "--help"]).output.split())
-    assert all(w in helptext for w in ("image error", "float precision", "minutes", "--scene demo --res 64"))
+    assert all(w in helptext for w in ("image error", "float precision", "minutes", "--quick --scene torus --res 64"))
+    res = CliRunner().invoke(main, ["bench", "--error", "--scene", "demo"], prog_name="frustrace")
+    assert res.exit_code == 2 and "exact motion" in res.output          # at once, not after the studies

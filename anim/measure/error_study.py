@@ -13,7 +13,7 @@ import numpy as np
 from anim import builtin
 from anim.scene import AnimatedScene
 
-from .image_error import RES, run_image_study
+from .image_error import FULL, QUICK, RES, run_image_study
 from .interp_error import bounce_overshoot, measure
 from .precision import precision_study
 
@@ -44,10 +44,13 @@ def eval_times(n, period):
     return period * ((0.5 + np.arange(n) * 0.6180339887498949) % 1.0)
 
 
-def run_error_report(names, image_res=None, say=None):
+def run_error_report(names, image_res=None, say=None, quick=False):
     """{'scenes': {name: measure(...)}, 'bounce': rows, 'image': ..., 'precision':
     ...} for scenes with exact motion; the image study at image_res pixels
-    square (default image_error.RES). say(text): a progress line per step."""
+    square (default image_error.RES). say(text): a progress line per step.
+    quick: fewer key spacings, samples, budgets and precision cases, and a
+    smaller reference (image_error.QUICK): the same tables in a fraction of
+    the time, for a first look."""
     say = say or (lambda text: None)
     scenes = {}
     for name in names:
@@ -57,7 +60,8 @@ def run_error_report(names, image_res=None, say=None):
         gen = builtin.get(name)
         n_moving = gen.exact_moving(0.0).shape[0]
         pick = np.linspace(0, n_moving - 1, min(n_moving, MAX_VERTICES)).astype(int)
-        result = measure(lambda t: gen.exact_moving(t)[pick], 0.0, gen.period)
+        result = measure(lambda t: gen.exact_moving(t)[pick], 0.0, gen.period,
+                         **({"key_counts": (5, 9, 17), "n_timed": 8} if quick else {}))
         frames = max(1.0, gen.period * FPS)
         for r in result["rows"]:                   # per-frame cost with the fit amortised
             r["frame_cost_ms"] = r["eval_ms"] + r["build_ms"] / frames
@@ -68,13 +72,13 @@ def run_error_report(names, image_res=None, say=None):
     say("interpolation error: the bouncing ball")
     bounce = bounce_overshoot()
     say(f"image error: spp, the error budget and area-light samples at {image_res or RES}^2")
-    image = run_image_study(names, image_res or RES)
+    image = run_image_study(names, image_res or RES, QUICK if quick else FULL)
     say("float precision")
-    return {"machine": platform.processor() or platform.machine(), "scenes": scenes,
-            "bounce": bounce, "image": image, "precision": run_precision_study(names)}
+    return {"machine": platform.processor() or platform.machine(), "scenes": scenes, "quick": quick,
+            "bounce": bounce, "image": image, "precision": run_precision_study(names, quick)}
 
 
-def run_precision_study(names):
+def run_precision_study(names, quick=False):
     """precision.py's table for the first built-in scene named, at the frame
     the image study renders."""
     for name in names:
@@ -83,5 +87,6 @@ def run_precision_study(names):
                 scene = AnimatedScene(builtin.get(name).write(Path(tmp) / name))
             t = scene.time_of(scene.frame_numbers[len(scene.frame_numbers) // 3])
             tv = scene.vertices_at(t).astype(np.float64)[scene.faces].reshape(-1, 9)
-            return {"scene": name, "rows": precision_study(tv, scene.camera_at(t))}
+            cases = {"res": 32, "scales": (1e-2, 1.0, 1e4), "offsets": (0.0, 1e4)} if quick else {}
+            return {"scene": name, "rows": precision_study(tv, scene.camera_at(t), **cases)}
     return None

@@ -70,23 +70,30 @@ def slope(rows, x="ms", y="rmse"):
     return float(np.polyfit(lx, ly, 1)[0])
 
 
-def spp_study(scene, t, res=RES):
+# `bench --error --quick`: the same studies with fewer and cheaper points
+QUICK = {"spps": (1, 4, 16), "ref_spp": 64, "light_samples": (1, 4, 16), "ref_light_samples": 128,
+         "max_errors": (0.04, 0.01)}
+FULL = {"spps": SPPS, "ref_spp": REF_SPP, "light_samples": LIGHT_SAMPLES, "ref_light_samples": REF_LIGHT_SAMPLES,
+        "max_errors": MAX_ERRORS}
+
+
+def spp_study(scene, t, res=RES, sizes=FULL):
     """(rows for uniform spp, rows for the error budget), against one reference."""
-    ref = _frame(scene, t, res, repeats=1, spp=REF_SPP)[0]
+    ref = _frame(scene, t, res, repeats=1, spp=sizes["ref_spp"])[0]
     rows = []
-    for spp in SPPS:
+    for spp in sizes["spps"]:
         rgb, ms, rays = _frame(scene, t, res, spp=spp)
         rows.append({"spp": spp, "ms": ms, "rays": rays, **_error(rgb, ref)})
-    return rows, budget_study(scene, t, res, ref, rows)
+    return rows, budget_study(scene, t, res, ref, rows, sizes["max_errors"])
 
 
-def budget_study(scene, t, res, ref, uniform_rows):
+def budget_study(scene, t, res, ref, uniform_rows, max_errors=MAX_ERRORS):
     """The error budget (render.max_error) at MAX_ERRORS: error, ms, rays,
     and the rays uniform spp needs for the same RMSE (log-log interpolated
     along uniform_rows; None outside their range), so ray_savings =
     uniform rays / budget rays."""
     rows = []
-    for e in MAX_ERRORS:
+    for e in max_errors:
         rgb, ms, rays = _frame(scene, t, res, max_error=e)
         err = _error(rgb, ref)
         same = rays_for_rmse(uniform_rows, err["rmse"])
@@ -120,30 +127,30 @@ def area_lit(scene):
     return None
 
 
-def light_samples_study(scene, index, t, res=RES):
+def light_samples_study(scene, index, t, res=RES, sizes=FULL):
     def with_samples(n):
         scene.spec.lights[index] = scene.spec.lights[index].model_copy(update={"samples": n})
-    with_samples(REF_LIGHT_SAMPLES)
+    with_samples(sizes["ref_light_samples"])
     ref = _frame(scene, t, res, repeats=1)[0]
     rows = []
-    for n in LIGHT_SAMPLES:
+    for n in sizes["light_samples"]:
         with_samples(n)
         rgb, ms, rays = _frame(scene, t, res)
         rows.append({"light_samples": n, "ms": ms, "rays": rays, **_error(rgb, ref)})
     return rows
 
 
-def run_image_study(names, res=RES):
+def run_image_study(names, res=RES, sizes=FULL):
     """{'spp': {scene: rows}, 'budget': {scene: rows}, 'light_samples':
     {scene: rows}, 'slopes': {...}} for the built-in scenes named; on the
     first of them that has a point light, that light made an area light:
     light samples 1..64, then spp and the error budget with AREA_SAMPLES
     emitters, AREA_PROBES of them probes."""
-    out = {"resolution": res, "ref_spp": REF_SPP, "ref_light_samples": REF_LIGHT_SAMPLES,
+    out = {"resolution": res, "ref_spp": sizes["ref_spp"], "ref_light_samples": sizes["ref_light_samples"],
            "expected_slopes": EXPECTED_SLOPES, "spp": {}, "budget": {}, "light_samples": {}, "slopes": {}}
 
     def pixel_studies(label, scene, t):
-        out["spp"][label], out["budget"][label] = spp_study(scene, t, res)
+        out["spp"][label], out["budget"][label] = spp_study(scene, t, res, sizes)
         out["slopes"][f"{label} spp"] = slope(out["spp"][label])
         out["slopes"][f"{label} budget"] = slope(out["budget"][label])
 
@@ -158,7 +165,7 @@ def run_image_study(names, res=RES):
                 index = area_lit(scene)
                 if index is not None:
                     label = f"{name} (area light)"
-                    rows = light_samples_study(scene, index, t, res)
+                    rows = light_samples_study(scene, index, t, res, sizes)
                     out["light_samples"][label] = rows
                     out["slopes"][f"{label} light samples"] = slope(rows)
                     scene.spec.lights[index] = scene.spec.lights[index].model_copy(

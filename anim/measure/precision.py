@@ -57,13 +57,13 @@ def brute_force_f64(origins, dirs, tris):
     return out
 
 
-def precision_study(tri_verts64, pose, res=RES):
+def precision_study(tri_verts64, pose, res=RES, scales=SCALES, offsets=OFFSETS):
     """Rows {scale, offset, median_rel, p99_rel, hit_mismatch} for one frame
     (tri_verts64 (n, 9) float64, pose = (eye, look_at, up, fov))."""
     eye, look_at, up, fov = (np.asarray(v, np.float64) if i < 3 else v for i, v in enumerate(pose))
     rows = []
-    for scale in SCALES:
-        for offset in OFFSETS:
+    for scale in scales:
+        for offset in offsets:
             tv = tri_verts64 * scale + offset
             e, la = eye * scale + offset, look_at * scale + offset
             basis = camera_basis(e, la, up, fov, res, res)              # float32, as the renderer has it

@@ -8,6 +8,7 @@ on it, slowing the render phases by up to a third, which costs more than the
 overlap gains. Raise the constant on machines with cores to spare.
 """
 import os
+import socket
 import time
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -105,7 +106,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     started = time.strftime("%Y-%m-%dT%H:%M:%S")
     # in every frame's header: a frame of a run killed before its stats were
     # written brings its run back into stats.json (stats.recovered_runs)
-    run_info = {"started": started, **settings_of(cfg)}
+    run_info = {"started": started, "host": socket.gethostname(), "pid": os.getpid(), **settings_of(cfg)}
     ended, extra = "complete", {"compile_s": 0.0}
     try:
         if client is None:

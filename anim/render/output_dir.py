@@ -66,7 +66,7 @@ def whole_frame(path: Path, width: int, height: int, channels, crc32=None) -> st
         inp.close()
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -85,7 +85,7 @@ def remove_stale_temps(directory: Path) -> list:
         return removed
     for entry in directory.iterdir():
         m = _TEMP.match(entry.name)
-        stale = (m and int(m.group(1)) != os.getpid() and not _alive(int(m.group(1)))) or \
+        stale = (m and int(m.group(1)) != os.getpid() and not process_alive(int(m.group(1)))) or \
             (entry.name.startswith(".") and entry.name.endswith(".claim") and _claim_is_stale(entry))
         if stale:
             try:
@@ -107,7 +107,7 @@ def _claim_is_stale(path: Path) -> bool:
     except (OSError, ValueError):
         return True                    # unreadable or half-written: its writer died at once
     if host == socket.gethostname():
-        return not _alive(int(pid))
+        return not process_alive(int(pid))
     return age > CLAIM_STALE_S
 
 

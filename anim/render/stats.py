@@ -3,6 +3,7 @@ arithmetic of SPEC section 5 (medians over frames, compile time apart)."""
 import fcntl
 import json
 import os
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
         previous["frames"] = [r for r in previous["frames"] if file_of(r["frame"]).exists()]
         listed = {r["frame"] for r in previous["frames"]} | {r["frame"] for r in rows}
         recovered = [row for f, frame_path in sorted(on_disk().items()) if f not in listed
-                     for row in [recovered_row(frame_path)] if row is not None]
+                     for row in [recovered_row(frame_path)] if row is not None and not _writer_alive(row)]
         previous["runs"] = [r for r in previous.get("runs", []) if isinstance(r, dict)]
         recovered_runs(previous["runs"], recovered)
         previous["frames"] += recovered
@@ -56,6 +57,15 @@ def recovered_row(path: Path):
     # the header was written before the write ended: its write time is unknown
     return {**row, "write_ms": None, "recovered": True,
             **({"run_info": run} if isinstance(run, dict) else {})}
+
+
+def _writer_alive(row) -> bool:
+    """Whether the run that wrote a recovered frame is still rendering here
+    (another render sharing the directory): its own stats come when it ends."""
+    from .output_dir import process_alive
+    info = row.get("run_info") or {}
+    return (info.get("host") == socket.gethostname() and isinstance(info.get("pid"), int)
+            and info["pid"] != os.getpid() and process_alive(info["pid"]))
 
 
 def recovered_runs(runs: list, recovered: list) -> None:
