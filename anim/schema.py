@@ -265,4 +265,8 @@ def parse_scene(data: dict) -> "SceneFile":
     date, a set) is a TypeError naming its type."""
     def refuse(value):
         raise TypeError(f"a value of type {type(value).__name__} ({value!r}) is not allowed here")
-    return SceneFile.model_validate_json(json.dumps(data, default=refuse))
+    try:
+        text = json.dumps(data, default=refuse)
+    except ValueError:                    # json's "Circular reference detected"
+        raise TypeError("a value contains itself (a YAML anchor used inside its own value)") from None
+    return SceneFile.model_validate_json(text)

@@ -286,9 +286,9 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
     stop = StopRequest()
     before = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with progress(len(frames), show) as on_frame:
+        with progress(len(frames), show) as (on_frame, on_compile):
             stats = render_animation(job, on_frame, warn=lambda m: click.echo(f"frustrace: warning: {m}", err=True),
-                                     should_stop=stop.pending, client=client)
+                                     should_stop=stop.pending, client=client, on_compile=on_compile)
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)

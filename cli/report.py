@@ -18,19 +18,35 @@ class Console(RichConsole):
 
 @contextlib.contextmanager
 def progress(n_frames, show):
-    """Yields a per-frame callback; draws a bar only when `show` (a terminal)."""
+    """Yields (on_frame, on_compile) callbacks for render_animation; draws a
+    bar only when `show` (a terminal). While a first run compiles, the bar's
+    line says so ("compiling (first run only): 7 kernels, now shade_samples,
+    41 s"); then it counts frames."""
     if not show:
-        yield None
+        yield None, None
         return
-    with Progress(TextColumn("frames"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+    import time
+    with Progress(TextColumn("{task.fields[what]}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TextColumn("{task.fields[fps]}"), TimeRemainingColumn(),
                   console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task("render", total=n_frames, fps="")
+        task = bar.add_task("render", total=n_frames, fps="", what="frames")
+        t0 = []
 
         def on_frame(row):
             ms = sum(row[k] for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms"))
             bar.update(task, advance=1, fps=f"{1000.0 / ms:.1f} fps" if ms > 0 else "")
-        yield on_frame
+
+        def on_compile(watch):
+            if watch is None:                      # the warm-up is over
+                bar.update(task, what="frames")
+                return
+            if not t0:
+                t0.append(time.perf_counter())
+            now = watch.current
+            bar.update(task, what=f"compiling (first run only): {len(watch.done)} kernels"
+                                  + (f", now {now.rsplit('.', 1)[-1]}" if now else "")
+                                  + f", {time.perf_counter() - t0[0]:.0f} s")
+        yield on_frame, on_compile
 
 
 def fitted_table(title, columns, rows, width) -> Table:
@@ -62,6 +78,7 @@ def fitted_table(title, columns, rows, width) -> Table:
 
 def summary_table(stats):
     s = stats["summary"]
+    compiled = (stats["runs"][-1].get("compiled") if stats.get("runs") else None) or {}
     med = s["median_ms"]
     table = Table(title=f"{stats['scene']}  {stats['resolution'][0]}x{stats['resolution'][1]}  "
                         f"packet {stats['packet']}  threads {stats['threads']}  "
@@ -72,7 +89,8 @@ def summary_table(stats):
     console = Console()
     console.print(table)
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
-                  f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps)")
+                  f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps; "
+                  + (f"{len(compiled)} kernels compiled, cached for later runs)" if compiled else "from the cache)"))
 
 
 def bench_table(rows, console=None):

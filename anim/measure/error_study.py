@@ -87,6 +87,6 @@ def run_precision_study(names, quick=False):
                 scene = AnimatedScene(builtin.get(name).write(Path(tmp) / name))
             t = scene.time_of(scene.frame_numbers[len(scene.frame_numbers) // 3])
             tv = scene.vertices_at(t).astype(np.float64)[scene.faces].reshape(-1, 9)
-            cases = {"res": 32, "scales": (1e-2, 1.0, 1e4), "offsets": (0.0, 1e4)} if quick else {}
+            cases = {"res": 32, "scales": (1e-4, 1.0, 1e4), "offsets": (0.0, 1e6)} if quick else {}
             return {"scene": name, "rows": precision_study(tv, scene.camera_at(t), **cases)}
     return None

@@ -20,6 +20,7 @@ from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.image_io import temp_path, write_exr
 
+from .compile_watch import watching
 from .frame_files import existing_frames, frame_file, plan_frames
 from .output_dir import claim, file_crc32, release, remove_stale_temps
 from .paths import writable_dir, writable_file
@@ -50,7 +51,8 @@ class FrameRenderError(RuntimeError):
     """A frame could not be rendered (on a cluster worker: the error it raised)."""
 
 
-def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None, client=None) -> dict:
+def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None, client=None,
+                     on_compile=None) -> dict:
     """Render the job's frames, here or, with a Dask `client`, on its
     cluster; returns the stats (also written to job.stats_path, merged by
     frame number with an earlier run's when resuming). Whatever ends the run
@@ -58,7 +60,8 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     written so far are in stats.json, no frame is left half-written, and no
     claim or temporary file of this run remains. should_stop() is asked
     before every frame: an exception it returns ends the run there (Ctrl-C
-    and SIGTERM, noted by the command line)."""
+    and SIGTERM, noted by the command line). on_compile(watch) is called as
+    the warm-up compiles each kernel (a first run only; compile_watch.py)."""
     scene, cfg = job.scene, job.cfg
     warn = warn or (lambda message: None)
     previous = read_stats(job.stats_path)
@@ -110,7 +113,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     ended, extra = "complete", {"compile_s": 0.0}
     try:
         if client is None:
-            _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info)
+            _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, on_compile)
         else:
             extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run_info))
     except BaseException as exc:
@@ -135,7 +138,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     return stats
 
 
-def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info) -> None:
+def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, on_compile=None) -> None:
     """Frames in this process, written by a writer thread; the compile
     (warm-up) seconds go into extra["compile_s"] as soon as they are known."""
     scene, cfg = job.scene, job.cfg
@@ -143,7 +146,11 @@ def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info) 
     check_memory(scene, cfg)
     if todo.first() is None:
         return
-    extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
+    with watching(on_compile) as watch:
+        extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
+    extra["compiled"] = watch.seconds()          # {kernel: s}: empty when the cache had them all
+    if on_compile is not None and watch.done:
+        on_compile(None)
     renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
 
     def write(path, result, row):
