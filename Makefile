@@ -20,9 +20,10 @@ install: $(STAMP)
 render: $(STAMP)
 	$(VENV)/bin/frustrace render anim/builtin/demo/anim.yaml -o out --overwrite
 
-## Install with test extras, then run the test suite.
+## Install with test extras, then run the test suite on every core (pytest-xdist; a file per
+## worker at a time, so that a file's fixtures are made once; the numba cache is shared).
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto --dist loadfile
 
 ## Measure fps per phase on every built-in scene.
 bench: $(STAMP)

@@ -1,6 +1,5 @@
 """Progress bar and the per-phase summary table (rich)."""
 import contextlib
-import os
 
 from rich.console import Console as RichConsole
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -120,7 +119,7 @@ def bench_table(rows, console=None):
                       "-" if peer else f"{r['tri_tests'] / max(r['resolution'] ** 2, 1):.1f}", *ratio])
     if console is None:
         console = Console()
-        if not console.is_terminal and "COLUMNS" not in os.environ:
+        if not console.is_terminal:
             console = Console(width=210)  # a pipe or file gets the whole table
     console.print(fitted_table("frustrace bench (median ms per frame; compile time excluded)", columns, cells,
                                console.width))
@@ -152,7 +151,7 @@ def compare_table(result, console=None):
                       f"{r['shadow_ms']:.1f}", f"{r['fps_raycast']:.1f}", f"{r['fps_full']:.1f}",
                       f"{r['primary_tests'] / 1e6:.2f}M", f"{r['tri_tests'] / 1e6:.1f}M",
                       f"{r['visits_per_packet']:.1f}", pub])
-    console = console or (Console() if Console().is_terminal or "COLUMNS" in os.environ else Console(width=170))
+    console = console or (Console() if Console().is_terminal else Console(width=170))
     console.print(fitted_table(title, columns, cells, console.width))
     for d in result["diff"]:
         console.print(f"{d['b']} vs {d['a']}: {d['hit_mismatch_pixels']} pixels hit/miss differ, "
