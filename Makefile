@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY      = $(VENV)/bin/python
 STAMP   = $(VENV)/.installed
 
-.PHONY: render test install bench previews clean
+.PHONY: render test install bench previews clean wheel
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,11 @@ render: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -n auto --dist loadfile
 
+## Build the installable wheel: dist/frustrace-*.whl (the demo scene inside; what workers install).
+wheel: $(STAMP)
+	rm -rf dist build
+	$(PY) -m pip wheel --no-deps -q -w dist .
+
 ## Measure fps per phase on every built-in scene.
 bench: $(STAMP)
 	$(VENV)/bin/frustrace bench
@@ -37,4 +42,4 @@ previews: $(STAMP)
 	done
 
 clean:
-	rm -rf out $(VENV) *.egg-info
+	rm -rf out dist build $(VENV) *.egg-info
