@@ -32,7 +32,6 @@ of rounding noise divided by 1e-9, would leak through the tangents of every
 smooth method and blow up the neighbouring segments.
 """
 import numpy as np
-from scipy.interpolate import Akima1DInterpolator, CubicSpline, PchipInterpolator
 from scipy.spatial.transform import Rotation, RotationSpline, Slerp
 
 from .vertex_kernels import horner_into
@@ -111,6 +110,9 @@ def _piece_coeffs(times, values, method):
         du = _centripetal_knot_steps(values)
         mu = _parabola_tangents(du, (p1 - p0) / du)      # d/du at each key
         return _hermite(p0, p1, mu[:-1] * du / h, mu[1:] * du / h, h)
+    # scipy.interpolate is imported here, by the scenes that use it: its
+    # import is ~0.4 s of every start-up otherwise (issue 21)
+    from scipy.interpolate import Akima1DInterpolator, CubicSpline, PchipInterpolator
     if method in _SCIPY_SPLINE_BC:
         poly = CubicSpline(times, values, axis=0, bc_type=_SCIPY_SPLINE_BC[method])
     elif method == "pchip":
