@@ -373,6 +373,9 @@ def test_resume_renders_again_a_frame_with_bytes_flipped_in_its_middle(tmp_path,
     assert ("checksum" in warned[0]) == stats_kept
     assert {p.name: p.stat().st_mtime_ns for p in exr_frames(out) if p != victim} == untouched
     assert pixels(victim)[1].shape == (192, 256, 5)
+    # frames decoded whole keep their checksum now: the next --resume compares it
+    stats = json.loads((out / "stats.json").read_text())
+    assert all(isinstance(r.get("crc32"), int) for r in stats["frames"]), stats["frames"]
 
 
 def test_a_second_scene_into_the_same_stats_is_refused_with_the_owner_named(tmp_path):

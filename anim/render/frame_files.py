@@ -7,7 +7,7 @@ from pathlib import Path
 from anim.errors import SceneError
 from raycore.config import RenderConfig
 
-from .output_dir import whole_frame
+from .output_dir import file_crc32, whole_frame
 
 
 def frame_path(pattern: str, frame: int) -> str:
@@ -85,6 +85,7 @@ class FramePlan:
         self.directory = frame_file(scene, out_dir, frames[0]).parent if len(frames) else None
         self.stale = set()                  # existing files to be rendered again
         self.finished = set()               # existing frames checked whole
+        self.verified = {}                  # frame: CRC-32 of the ones checked by a full decode
         self.existing = existing_frames(scene, out_dir, frames)
         if overwrite:
             self.stale = set(self.existing.values())
@@ -101,9 +102,13 @@ class FramePlan:
         if path is None:
             return False
         cfg = self.cfg
-        problem = whole_frame(path, cfg.width, cfg.height, frame_channels(cfg), self.checksums.get(f)) if cfg else ""
+        known = self.checksums.get(f)
+        problem = whole_frame(path, cfg.width, cfg.height, frame_channels(cfg), known) if cfg else ""
         if not problem:
             self.finished.add(f)
+            if known is None and cfg:
+                # decoded whole: its checksum spares the next --resume the decode
+                self.verified[f] = file_crc32(path)
             return True
         if self.warn:
             self.warn(f"{path}: {problem}; rendering frame {f} again")

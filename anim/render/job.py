@@ -129,7 +129,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
                                 lambda f: frame_file(scene, job.out_dir, f),
-                                lambda: existing_frames(scene, job.out_dir, job.frames))
+                                lambda: existing_frames(scene, job.out_dir, job.frames), todo.verified)
         except OSError as exc:
             message = f"cannot write {job.stats_path}: {exc.strerror or exc}"
             if ended == "complete":

@@ -12,12 +12,14 @@ from raycore.accelerators import packet_of
 from raycore.config import SHADOW_ACCEL, RenderConfig
 
 
-def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
+def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk, verified=None) -> dict:
     """Merge this run into stats.json under a lock on its directory (two
     renders sharing a directory each add their frames): the earlier runs'
     frames whose files still exist, this run's, and the job's frames on disk
     (on_disk(): {frame: path}) that no stats.json lists (written by a run
-    that was killed), recovered from their EXR headers. Written atomically."""
+    that was killed), recovered from their EXR headers, with the CRC-32 of
+    those this run decoded whole (`verified`: {frame: crc}). Written
+    atomically."""
     fd = os.open(path.parent, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
@@ -27,6 +29,9 @@ def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
         recovered = [row for f, frame_path in sorted(on_disk().items()) if f not in listed
                      for row in [recovered_row(frame_path)] if row is not None and not _writer_alive(row)]
         previous["runs"] = [r for r in previous.get("runs", []) if isinstance(r, dict)]
+        for row in recovered:
+            if (verified or {}).get(row["frame"]) is not None:
+                row["crc32"] = verified[row["frame"]]
         recovered_runs(previous["runs"], recovered)
         previous["frames"] += recovered
         stats = merged_stats(previous, scene, cfg, rows, run)
@@ -40,7 +45,7 @@ def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk) -> dict:
 
 def recovered_row(path: Path):
     """The stats row a frame carries in its header (frustrace:stats), marked
-    recovered (its write_ms is unknown: 0); None for a file without one."""
+    recovered (its write_ms is unknown: None); None for a file without one."""
     import OpenImageIO as oiio
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
