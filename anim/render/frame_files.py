@@ -10,15 +10,24 @@ from raycore.config import RenderConfig
 from .output_dir import file_crc32, whole_frame
 
 
+def split_pattern(pattern: str):
+    """(head, width, tail) around output.path's (last) run of '#', or None
+    when it has none."""
+    runs = re.findall(r"#+", pattern)
+    if not runs:
+        return None
+    head, _, tail = pattern.rpartition(runs[-1])
+    return head, len(runs[-1]), tail
+
+
 def frame_path(pattern: str, frame: int) -> str:
     """Replace the run of '#' (the schema allows one) with the frame number,
     zero-padded to the run's width; a negative frame gets its sign in front
     of the padded digits (frame -1 in f_###.exr: f_-001.exr)."""
-    runs = re.findall(r"#+", pattern)
-    if not runs:
+    parts = split_pattern(pattern)
+    if parts is None:
         return pattern
-    width = len(runs[-1])
-    head, _, tail = pattern.rpartition(runs[-1])
+    head, width, tail = parts
     return f"{head}{'-' if frame < 0 else ''}{abs(frame):0{width}d}{tail}"
 
 
@@ -45,11 +54,11 @@ def existing_frames(scene, out_dir, frames) -> dict:
         return {}
     directory = frame_file(scene, out_dir, frames[0]).parent
     pattern = Path(scene.spec.output.path).name
-    runs = re.findall(r"#+", pattern)
-    if not runs:
+    parts = split_pattern(pattern)
+    if parts is None:
         path = frame_file(scene, out_dir, frames[0])
         return {frames[0]: path} if path.exists() else {}
-    head, _, tail = pattern.rpartition(runs[-1])
+    head, _, tail = parts
     number = re.compile(re.escape(head) + r"(-?[0-9]+)" + re.escape(tail) + "$")
     found = {}
     try:

@@ -11,6 +11,8 @@ import numpy as np
 from raycore.accelerators import packet_of
 from raycore.config import SHADOW_ACCEL, RenderConfig
 
+from .output_dir import process_alive
+
 
 def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk, verified=None) -> dict:
     """Merge this run into stats.json under a lock on its directory (two
@@ -67,7 +69,6 @@ def recovered_row(path: Path):
 def _writer_alive(row) -> bool:
     """Whether the run that wrote a recovered frame is still rendering here
     (another render sharing the directory): its own stats come when it ends."""
-    from .output_dir import process_alive
     info = row.get("run_info") or {}
     return (info.get("host") == socket.gethostname() and isinstance(info.get("pid"), int)
             and info["pid"] != os.getpid() and process_alive(info["pid"]))
