@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._jit import kernel, parallel_arith_kernel, parallel_kernel
+from ._jit import helper, parallel_arith_kernel, parallel_kernel
 from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .grid_cgt import F0, F1, INF
 from .workspace import scratch
@@ -49,60 +49,74 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
     """Shadow ray of every surface sample to one light (kind 0: point at
     (lx, ly, lz); 1: directional, travelling along the unit (lx, ly, lz)).
     Inactive (t_max = -1) where the smooth normal faces away from the light.
-    face / key_s / key_t: the light-space coordinates the packets are sorted by."""
+    face / key_s / key_t: the light-space coordinates the packets are sorted by.
+    One branch-free loop per kind, so that each vectorizes (one loop testing
+    the kind per sample did not: 6.3 ms a light on hand at 1024^2)."""
     n = mag.shape[0]
-    light_mag = max(abs(lx), abs(ly), abs(lz)) if kind == 0 else F0
-    for i in prange(n):
-        qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
-        if kind == 0:
+    if kind == 0:
+        light_mag = max(abs(lx), abs(ly), abs(lz))
+        for i in prange(n):
+            qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
             tx, ty, tz = lx - qx, ly - qy, lz - qz
-        else:
-            tx, ty, tz = -lx, -ly, -lz
-        facing = smooth_n[0, i] * tx + smooth_n[1, i] * ty + smooth_n[2, i] * tz > F0
-        dist0 = np.sqrt(tx * tx + ty * ty + tz * tz) if kind == 0 else F0
-        off = offset_ulps * ULP * (mag[i] + light_mag + dist0)
-        ox = qx + geo_n[0, i] * off
-        oy = qy + geo_n[1, i] * off
-        oz = qz + geo_n[2, i] * off
-        if kind == 0:
+            facing = smooth_n[0, i] * tx + smooth_n[1, i] * ty + smooth_n[2, i] * tz > F0
+            dist0 = np.sqrt(tx * tx + ty * ty + tz * tz)
+            off = offset_ulps * ULP * (mag[i] + light_mag + dist0)
             # from the light to the offset point
-            dx, dy, dz = ox - lx, oy - ly, oz - lz
+            dx = qx + geo_n[0, i] * off - lx
+            dy = qy + geo_n[1, i] * off - ly
+            dz = qz + geo_n[2, i] * off - lz
             dist = np.sqrt(dx * dx + dy * dy + dz * dz)
             inv = F1 / dist if dist > F0 else F0
             dx, dy, dz = dx * inv, dy * inv, dz * inv
-            ray_o[0, i], ray_o[1, i], ray_o[2, i] = lx, ly, lz
+            ray_o[0, i] = lx
+            ray_o[1, i] = ly
+            ray_o[2, i] = lz
+            ray_d[0, i] = dx
+            ray_d[1, i] = dy
+            ray_d[2, i] = dz
             t_min[i] = dist * SHADOW_T_MIN_FRACTION
             t_max[i] = dist if (facing & (dist > F0)) else -F1
             # cube-map face of the direction and its two coordinates on it
             ax, ay, az = abs(dx), abs(dy), abs(dz)
-            if ax >= ay and ax >= az:
-                f, s, t, big = (0 if dx > F0 else 1), dy, dz, ax
-            elif ay >= az:
-                f, s, t, big = (2 if dy > F0 else 3), dz, dx, ay
-            else:
-                f, s, t, big = (4 if dz > F0 else 5), dx, dy, az
+            x_major = (ax >= ay) & (ax >= az)
+            y_major = (~x_major) & (ay >= az)
+            f = np.int32(0 if dx > F0 else 1) if x_major else (
+                np.int32(2 if dy > F0 else 3) if y_major else np.int32(4 if dz > F0 else 5))
+            s = dy if x_major else (dz if y_major else dx)
+            t = dz if x_major else (dx if y_major else dy)
+            big = ax if x_major else (ay if y_major else az)
             inv_big = F1 / big if big > F0 else F0
             face[i] = f
             key_s[i] = s * inv_big
             key_t[i] = t * inv_big
+    else:
+        # coordinates in the plane normal to the light (any fixed basis)
+        if abs(lx) < np.float32(0.6):
+            ux, uy, uz = F0, lz, -ly          # (1, 0, 0) x l
         else:
-            dx, dy, dz = -lx, -ly, -lz
-            ray_o[0, i], ray_o[1, i], ray_o[2, i] = ox, oy, oz
+            ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
+        vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
+        for i in prange(n):
+            qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
+            facing = smooth_n[0, i] * lx + smooth_n[1, i] * ly + smooth_n[2, i] * lz < F0
+            off = offset_ulps * ULP * mag[i]
+            ox = qx + geo_n[0, i] * off
+            oy = qy + geo_n[1, i] * off
+            oz = qz + geo_n[2, i] * off
+            ray_o[0, i] = ox
+            ray_o[1, i] = oy
+            ray_o[2, i] = oz
+            ray_d[0, i] = -lx
+            ray_d[1, i] = -ly
+            ray_d[2, i] = -lz
             t_min[i] = F0
             t_max[i] = INF if facing else -F1
-            # coordinates in the plane normal to the light (any fixed basis)
-            if abs(lx) < np.float32(0.6):
-                ux, uy, uz = F0, lz, -ly          # (1, 0, 0) x l
-            else:
-                ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
-            vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
             face[i] = 0
             key_s[i] = ox * ux + oy * uy + oz * uz
             key_t[i] = ox * vx + oy * vy + oz * vz
-        ray_d[0, i], ray_d[1, i], ray_d[2, i] = dx, dy, dz
 
 
-@kernel
+@helper
 def _spread(v):
     """Bits of a 10-bit integer spread to the even bit positions."""
     v &= 0x3FF
@@ -114,10 +128,10 @@ def _spread(v):
 
 
 @parallel_kernel
-def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, order):
+def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, key, order):
     """Active rays (t_max > 0) in order of (face, Morton cell); returns how
     many. A counting sort: one histogram per chunk, then each chunk scatters
-    its rays in input order (stable)."""
+    its rays in input order (stable). key (n,) i32: work space."""
     n = t_max.shape[0]
     cells = 1 << (2 * bits)
     n_buckets = N_FACES * cells
@@ -149,17 +163,20 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, order):
                 mx = max(mx, hi[c, f, a])
             f_lo[f, a] = mn
             f_scale[f, a] = top / (mx - mn) if mx > mn else F0
-    # histogram per chunk, keys kept for the scatter
-    key = np.empty(n, np.int32)
-    hist = np.zeros((n_chunks, n_buckets), np.int64)
+    # keys in a branch-free loop (-1: inactive), then the histogram per chunk:
+    # one loop doing both measured 3.3 ms against 1.8 + 0.5 (hand, 1024^2)
     for c in prange(n_chunks):
         for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            if t_max[i] > F0:
-                f = face[i]
-                cu = int((key_s[i] - f_lo[f, 0]) * f_scale[f, 0])
-                cv = int((key_t[i] - f_lo[f, 1]) * f_scale[f, 1])
-                k = f * cells + (_spread(cu) | (_spread(cv) << 1))
-                key[i] = k
+            f = face[i]
+            cu = np.int32((key_s[i] - f_lo[f, 0]) * f_scale[f, 0])
+            cv = np.int32((key_t[i] - f_lo[f, 1]) * f_scale[f, 1])
+            k = np.int32(f * cells) + (_spread(cu) | (_spread(cv) << 1))
+            key[i] = k if t_max[i] > F0 else np.int32(-1)
+    hist = np.zeros((n_chunks, n_buckets), np.int32)
+    for c in prange(n_chunks):
+        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            k = key[i]
+            if k >= 0:
                 hist[c, k] += 1
     # exclusive prefix in (bucket, chunk) order: chunk c's rays of bucket k
     # follow chunk c-1's, which keeps input order within a bucket
@@ -171,8 +188,8 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, order):
             total += count
     for c in prange(n_chunks):
         for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-            if t_max[i] > F0:
-                k = key[i]
+            k = key[i]
+            if k >= 0:
                 order[hist[c, k]] = i
                 hist[c, k] += 1
     return total
@@ -211,7 +228,7 @@ class LightRays:
         self.order = take("order", n, np.int32)
         chunks = max(1, numba.get_num_threads())
         self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
-                                              self.order)) if n else 0
+                                              take("key", n, np.int32), self.order)) if n else 0
 
     @property
     def shared_origin(self):
