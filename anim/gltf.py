@@ -22,7 +22,14 @@ from .vertex_kernels import skin_into, transform_into
 
 _DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_PATHS = ("translation", "rotation", "scale", "weights")
 _NORMALIZE = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
+
+
+def _field(obj, name, default=None):
+    """A field of a glTF object that pygltflib gives as a dataclass or a dict."""
+    value = obj.get(name, default) if isinstance(obj, dict) else getattr(obj, name, default)
+    return default if value is None else value
 
 
 def _quat_matrix(q):
@@ -77,8 +84,9 @@ class GltfObject:
     """Geometry and motion of one glTF file; `place(t, out, transform)` writes
     the posed vertices (n, 3) f32."""
 
-    def __init__(self, path, animation, extrapolate, scene_path, key):
+    def __init__(self, path, animation, extrapolate, scene_path, key, warnings=None):
         self.path, self.scene_path, self.key = Path(path), scene_path, key
+        self.warnings = warnings if warnings is not None else []
         self.extrapolate = extrapolate
         try:
             self.doc = pygltflib.GLTF2().load(str(path))
@@ -113,30 +121,56 @@ class GltfObject:
         except OSError as exc:
             self._fail(f"buffer {i}: cannot read {buf.uri}: {exc.strerror}")
 
+    def _view_array(self, what, view_index, offset, count, dtype, width):
+        """(count, width) array read from a buffer view (its byteStride, or packed)."""
+        view = self.doc.bufferViews[view_index]
+        data = self._buffers[view.buffer]
+        stride = view.byteStride or dtype.itemsize * width
+        start = (view.byteOffset or 0) + (offset or 0)
+        end = start + (count - 1) * stride + dtype.itemsize * width if count > 0 else start
+        if count < 0 or start < 0 or stride < dtype.itemsize * width or end > len(data):
+            self._fail(f"{what} ({count} x {width} values) reaches byte {end} of a {len(data)}-byte buffer")
+        return np.ndarray((count, width), dtype, buffer=data, offset=start,
+                          strides=(stride, dtype.itemsize)).copy()
+
     def accessor(self, index):
-        """(count, width) array of an accessor; normalised integers become floats."""
+        """(count, width) array of an accessor, sparse substitutions applied;
+        normalised integers become floats."""
         acc = self.doc.accessors[index]
-        if acc.sparse is not None:
-            self._fail(f"accessor {index} is sparse; sparse accessors are not supported")
         dtype = np.dtype(_DTYPE[acc.componentType])
         width = _WIDTH.get(acc.type)
         if width is None:
             self._fail(f"accessor {index} has unsupported type {acc.type}")
         if acc.bufferView is None:
-            return np.zeros((acc.count, width), dtype)
-        view = self.doc.bufferViews[acc.bufferView]
-        data = self._buffers[view.buffer]
-        stride = view.byteStride or dtype.itemsize * width
-        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-        end = start + (acc.count - 1) * stride + dtype.itemsize * width if acc.count > 0 else start
-        if acc.count < 0 or start < 0 or stride < dtype.itemsize * width or end > len(data):
-            self._fail(f"accessor {index} ({acc.count} x {acc.type}) reaches byte {end} of a "
-                       f"{len(data)}-byte buffer")
-        arr = np.ndarray((acc.count, width), dtype, buffer=data, offset=start,
-                         strides=(stride, dtype.itemsize)).copy()
+            arr = np.zeros((acc.count, width), dtype)
+        else:
+            arr = self._view_array(f"accessor {index}", acc.bufferView, acc.byteOffset, acc.count, dtype, width)
+        if acc.sparse is not None:
+            self._apply_sparse(index, acc, arr, dtype, width)
         if acc.normalized and dtype.type in _NORMALIZE:
             arr = np.maximum(arr / _NORMALIZE[dtype.type], -1.0)
         return arr
+
+    def _apply_sparse(self, index, acc, arr, dtype, width):
+        """glTF 2.0 section 3.6.2.3: `count` elements replaced, at the
+        positions the indices name, by the values (Blender writes morph
+        targets this way)."""
+        sparse = acc.sparse
+        count = _field(sparse, "count")
+        ind, val = _field(sparse, "indices"), _field(sparse, "values")
+        if not isinstance(count, int) or count < 1 or ind is None or val is None:
+            self._fail(f"accessor {index}: sparse needs a count >= 1, indices and values")
+        ind_type = _field(ind, "componentType")
+        if ind_type not in (5121, 5123, 5125):
+            self._fail(f"accessor {index}: sparse indices must be unsigned integers, not component type {ind_type}")
+        positions = self._view_array(f"accessor {index} sparse indices", _field(ind, "bufferView"),
+                                     _field(ind, "byteOffset"), count, np.dtype(_DTYPE[ind_type]), 1)[:, 0]
+        values = self._view_array(f"accessor {index} sparse values", _field(val, "bufferView"),
+                                  _field(val, "byteOffset"), count, dtype, width)
+        positions = positions.astype(np.int64)
+        if positions.max() >= acc.count or np.any(np.diff(positions) <= 0):
+            self._fail(f"accessor {index}: sparse indices must increase and stay below its count {acc.count}")
+        arr[positions] = values
 
     def _nodes(self):
         doc = self.doc
@@ -172,7 +206,7 @@ class GltfObject:
 
     def _meshes(self):
         doc = self.doc
-        self.instances, verts, faces, uvs = [], [], [], []
+        self.instances, verts, faces, uvs, face_material = [], [], [], [], []
         offset = 0
         for node_index in self.order:
             node = doc.nodes[node_index]
@@ -190,9 +224,7 @@ class GltfObject:
                        else np.arange(len(pos)))
                 if len(idx) % 3 or (len(idx) and idx.max() >= len(pos)):
                     self._fail(f"mesh {node.mesh} primitive {p_index}: bad triangle indices")
-                uv = (self.accessor(attrs.TEXCOORD_0).astype(np.float32) if attrs.TEXCOORD_0 is not None
-                      else np.zeros((len(pos), 2), np.float32))
-                uv[:, 1] = 1 - uv[:, 1]               # glTF v runs down, frustrace's up
+                uv = self._primitive_uvs(prim, len(pos))
                 inst = {"node": node_index, "offset": offset, "rest": np.ascontiguousarray(pos),
                         "targets": [self.accessor(t["POSITION"]).astype(np.float32)
                                     for t in (prim.targets or []) if t.get("POSITION") is not None],
@@ -216,6 +248,8 @@ class GltfObject:
                 self.instances.append(inst)
                 verts.append(pos)
                 faces.append(idx.reshape(-1, 3).astype(np.int32) + offset)
+                face_material.append(np.full(len(idx) // 3, -1 if prim.material is None else prim.material,
+                                             np.int32))
                 uvs.append(uv)
                 offset += len(pos)
         if not self.instances:
@@ -224,8 +258,125 @@ class GltfObject:
         self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
         self.uvs = np.ascontiguousarray(np.concatenate(uvs), np.float32)
         self.rest = np.concatenate(verts)
+        # the file's material of each triangle (-1: none), and those materials
+        self.face_material = np.concatenate(face_material)
+        used = sorted({int(m) for m in np.unique(self.face_material) if m >= 0})
+        self.materials = {m: self._material(m) for m in used}
+
+    def _texture_info(self, material_index):
+        """The base colour texture's info of a material, or None."""
+        mat = self.doc.materials[material_index]
+        pbr = mat.pbrMetallicRoughness
+        return None if pbr is None else pbr.baseColorTexture
+
+    def _primitive_uvs(self, prim, n):
+        """(n, 2) f32 texture coordinates of a primitive for its material's
+        base colour texture: the set it names (texCoord), through its
+        KHR_texture_transform, v flipped (glTF's v runs down, frustrace's up)."""
+        info = self._texture_info(prim.material) if prim.material is not None else None
+        transform = (_field(info, "extensions", {}) or {}).get("KHR_texture_transform") if info else None
+        texcoord = _field(info, "texCoord", 0) if info else 0
+        if transform and "texCoord" in transform:
+            texcoord = transform["texCoord"]
+        accessor = getattr(prim.attributes, f"TEXCOORD_{texcoord}", None)
+        if accessor is None:
+            return np.zeros((n, 2), np.float32)
+        uv = self.accessor(accessor).astype(np.float64)
+        if transform:
+            # matrix = translation * rotation * scale (the extension's specification)
+            ox, oy = transform.get("offset", (0.0, 0.0))
+            sx, sy = transform.get("scale", (1.0, 1.0))
+            r = float(transform.get("rotation", 0.0))
+            c, s = np.cos(r), np.sin(r)
+            u, v = uv[:, 0] * sx, uv[:, 1] * sy
+            uv = np.stack([ox + c * u + s * v, oy - s * u + c * v], axis=1)
+        uv[:, 1] = 1 - uv[:, 1]
+        return uv.astype(np.float32)
+
+    def _material(self, index):
+        """A frustrace material (anim/scene.py's keys) from the file's material:
+        base colour factor and texture as the diffuse term (the texture
+        sRGB-decoded, as glTF stores it); roughness r to the Blinn-Phong
+        exponent of the same Beckmann width, 2 / r^4 - 2 (Walter et al. 2007),
+        clamped to [1, 10^4]; specular weight 0.04 (a dielectric's
+        reflectance) up to 1 with the metallic factor."""
+        mat = self.doc.materials[index]
+        pbr = mat.pbrMetallicRoughness
+        colour = list(_field(pbr, "baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3] if pbr else [1.0, 1.0, 1.0]
+        metallic = float(_field(pbr, "metallicFactor", 1.0)) if pbr else 1.0
+        roughness = float(_field(pbr, "roughnessFactor", 1.0)) if pbr else 1.0
+        alpha2 = max(roughness, 1e-3) ** 4
+        texture = None
+        info = self._texture_info(index)
+        if info is not None and _field(info, "index") is not None:
+            texture = self._image(_field(info, "index"))
+        return {"name": mat.name or f"material {index}",
+                "diffuse": tuple(float(min(max(c, 0.0), 1e6)) for c in colour),
+                "specular": 0.04 + 0.96 * min(max(metallic, 0.0), 1.0),
+                "shininess": float(min(max(2.0 / alpha2 - 2.0, 1.0), 1e4)),
+                "texture": texture, "texture_space": "srgb"}
+
+    def _image(self, texture_index):
+        """The image of a texture: a path, or (bytes, suffix) for one stored
+        in the file (a buffer view or a data: URI)."""
+        doc = self.doc
+        source = doc.textures[texture_index].source
+        if source is None:
+            self._fail(f"texture {texture_index} has no image source")
+        image = doc.images[source]
+        suffix = {"image/png": ".png", "image/jpeg": ".jpg"}.get(image.mimeType or "", ".png")
+        if image.uri is None:
+            view = doc.bufferViews[image.bufferView]
+            data = self._buffers[view.buffer]
+            start = view.byteOffset or 0
+            return bytes(data[start:start + view.byteLength]), suffix
+        if image.uri.startswith("data:"):
+            header = image.uri.split(",", 1)[0]
+            suffix = ".jpg" if "jpeg" in header else ".png"
+            return base64.b64decode(image.uri.split(",", 1)[1]), suffix
+        path = self.path.parent / unquote(image.uri)
+        if not path.is_file():
+            self._fail(f"image {source}: file not found: {path}")
+        return path
+
+    def _chosen(self, which):
+        """Indices of the animations `which` names: None (the first), an index,
+        a name, "all", or a list of indices and names."""
+        names = [a.name for a in self.doc.animations]
+        if which is None:
+            return [0]
+        if which == "all":
+            return list(range(len(names)))
+        chosen = []
+        for item in (which if isinstance(which, list) else [which]):
+            if isinstance(item, int):
+                if not 0 <= item < len(names):
+                    self._fail(f"animation {item} out of range (the file has {len(names)})")
+                index = item
+            elif item in names:
+                index = names.index(item)
+            else:
+                self._fail(f"no animation named {item!r}; the file has {names}")
+            if index in chosen:
+                self._fail(f"animation {item!r} is chosen twice")
+            chosen.append(index)
+        return chosen
+
+    def _label(self, index):
+        name = self.doc.animations[index].name
+        return f"{index} ({name!r})" if name else str(index)
+
+    def _driven(self, index):
+        """(node, path) pairs animation `index` drives."""
+        return {(ch.target.node, ch.target.path) for ch in self.doc.animations[index].channels
+                if ch.target.node is not None and ch.target.path in _PATHS}
 
     def _animation(self, which):
+        """The channels of the chosen animations, played together. Two of them
+        driving one node's same property is an error; an animation left out
+        that drives a node property the chosen ones do not is a warning
+        (Blender writes one animation per action: the armature's bones in
+        one, the mesh's shape-key weights in another)."""
         doc = self.doc
         self.channels = []
         self.t0 = self.t1 = 0.0
@@ -233,31 +384,41 @@ class GltfObject:
             if which is not None:
                 self._fail(f"animation {which!r} requested, but the file has none")
             return
-        names = [a.name for a in doc.animations]
-        if which is None:
-            index = 0
-        elif isinstance(which, int):
-            index = which
-            if not 0 <= index < len(names):
-                self._fail(f"animation {which} out of range (the file has {len(names)})")
-        elif which in names:
-            index = names.index(which)
-        else:
-            self._fail(f"no animation named {which!r}; the file has {names}")
-        anim = doc.animations[index]
-        starts, ends = [], []
-        for ch in anim.channels:
-            if ch.target.node is None or ch.target.path not in ("translation", "rotation", "scale", "weights"):
+        chosen = self._chosen(which)
+        owner = {}
+        for index in chosen:
+            for target in sorted(self._driven(index)):
+                if target in owner:
+                    self._fail(f"animations {self._label(owner[target])} and {self._label(index)} both drive "
+                               f"node {target[0]}'s {target[1]}; choose one of them")
+                owner[target] = index
+        for index in range(len(doc.animations)):
+            if index in chosen:
                 continue
-            smp = anim.samplers[ch.sampler]
-            times = self.accessor(smp.input).reshape(-1).astype(np.float64)
-            if np.any(np.diff(times) <= 0):
-                self._fail(f"animation {index} sampler {ch.sampler}: key times must increase")
-            values = self.accessor(smp.output).astype(np.float64)
-            self.channels.append((ch.target.node, ch.target.path,
-                                  _Sampler(times, values, smp.interpolation or "LINEAR", ch.target.path == "rotation")))
-            starts.append(times[0])
-            ends.append(times[-1])
+            extra = sorted(self._driven(index) - set(owner))
+            if extra:
+                what = ", ".join(f"{doc.nodes[n].name or f'node {n}'}'s {p}" for n, p in extra[:4])
+                more = f" and {len(extra) - 4} more" if len(extra) > 4 else ""
+                self.warnings.append(
+                    f"{self.key}: {self.path.name}: animation {self._label(index)} is not played, and it "
+                    f"drives {what}{more}, which the played animation(s) do not; "
+                    f"'animation: all' (key {self.key.rsplit('.', 1)[0]}.animation) plays every animation")
+        starts, ends = [], []
+        for index in chosen:
+            anim = doc.animations[index]
+            for ch in anim.channels:
+                if ch.target.node is None or ch.target.path not in _PATHS:
+                    continue
+                smp = anim.samplers[ch.sampler]
+                times = self.accessor(smp.input).reshape(-1).astype(np.float64)
+                if np.any(np.diff(times) <= 0):
+                    self._fail(f"animation {self._label(index)} sampler {ch.sampler}: key times must increase")
+                values = self.accessor(smp.output).astype(np.float64)
+                self.channels.append((ch.target.node, ch.target.path,
+                                      _Sampler(times, values, smp.interpolation or "LINEAR",
+                                               ch.target.path == "rotation")))
+                starts.append(times[0])
+                ends.append(times[-1])
         if self.channels:
             self.t0, self.t1 = min(starts), max(ends)
 

@@ -128,7 +128,8 @@ class SceneObject:
                 if self.curve.constant:
                     self.curve = None
         elif spec.mesh.lower().endswith((".gltf", ".glb")):
-            self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh")
+            self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
+                                   warnings)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
         else:
             self.base, self.faces, self.uvs = load_mesh(base / spec.mesh, scene_path, f"{key}.mesh")
@@ -195,6 +196,7 @@ class AnimatedScene:
                 self.texture_spaces.append(m["texture_space"])
             else:
                 m["texture_index"] = -1
+        default_material = len(self.material_names)
         self.warnings = []         # e.g. quaternions normalised; the CLI prints them
         self.objects = []
         offset = 0
@@ -212,11 +214,17 @@ class AnimatedScene:
             obj = SceneObject(o, self.path, i, self.warnings)
             obj.offset = offset
             obj.face_offset = sum(len(f) for f in faces)
-            mat = self.material_names.index(o.material) if o.material else len(self.material_names)
-            textured = self.materials[mat]["texture_index"] >= 0
+            mat = self.material_names.index(o.material) if o.material else default_material
+            if obj.gltf is not None and o.material is None and obj.gltf.materials:
+                # the file's own materials, per primitive; `material:` overrides them all
+                face_mat = self._gltf_materials(obj.gltf, i, default_material)
+                textured = any(self.materials[m]["texture_index"] >= 0 for m in np.unique(face_mat))
+            else:
+                face_mat = np.full(len(obj.faces), mat, np.int32)
+                textured = self.materials[mat]["texture_index"] >= 0
             any_uv_needed |= textured and obj.uvs is not None
             faces.append(obj.faces + offset)
-            mats.append(np.full(len(obj.faces), mat, np.int32))
+            mats.append(face_mat)
             uvs.append((obj.uvs, len(obj.base)))
             offset += len(obj.base)
             self.objects.append(obj)
@@ -256,6 +264,27 @@ class AnimatedScene:
         if not spec.lights:
             self.warnings.append("no lights: surfaces get the ambient term only")
         self._warn_outside_keys()
+
+    def _gltf_materials(self, gltf, index, default_material):
+        """Material rows for a glTF object's own materials (appended to
+        self.materials, textures registered); (n_t,) i32 row per triangle,
+        the default material where a primitive has none."""
+        rows = {}
+        for m, mat in gltf.materials.items():
+            mat = dict(mat)
+            if mat["texture"] is not None:
+                self.texture_keys.append(f"objects.{index}.mesh")
+                mat["texture_index"] = len(self.texture_paths)
+                self.texture_paths.append(mat["texture"])
+                self.texture_spaces.append(mat["texture_space"])
+            else:
+                mat["texture_index"] = -1
+            rows[m] = len(self.materials)
+            self.materials.append(mat)
+        lookup = np.full(max(rows) + 2, default_material, np.int32)
+        for m, row in rows.items():
+            lookup[m] = row
+        return lookup[gltf.face_material]       # -1 (no material) -> the last entry: the default
 
     def _paths_outside(self):
         """(key, path) of every file reference that resolves outside the

@@ -228,7 +228,7 @@ class Object(Strict):
     transform: Optional[Transform] = None
     keyframes: Optional[List[Keyframe]] = None
     skeleton: Optional[Skeleton] = None
-    animation: Optional[Union[int, str]] = None
+    animation: Optional[Union[int, str, Annotated[List[Union[int, str]], Field(min_length=1)]]] = None
     interpolation: Interp = "linear"
     extrapolate: Literal["clamp", "loop"] = "clamp"
 

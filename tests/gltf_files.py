@@ -31,6 +31,46 @@ class GltfBuilder:
         self.doc.accessors.append(acc)
         return len(self.doc.accessors) - 1
 
+    def _view(self, data):
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        self.doc.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(self.blob), byteLength=len(data)))
+        self.blob += data
+        return len(self.doc.bufferViews) - 1
+
+    def sparse_accessor(self, base, count, positions, values, index_component=USHORT):
+        """A float accessor of `count` rows stored sparse, as Blender writes
+        morph targets: `base` rows (None: zeros, no buffer view) with rows
+        `positions` replaced by `values`."""
+        values = np.asarray(values, np.float32).reshape(len(positions), -1)
+        width = values.shape[1]
+        idx_dtype = {5121: np.uint8, USHORT: np.uint16, UINT: np.uint32}[index_component]
+        acc = gl.Accessor(componentType=FLOAT, count=count, type=_TYPE[width],
+                          sparse=gl.Sparse(count=len(positions),
+                                           indices=gl.AccessorSparseIndices(
+                                               bufferView=self._view(np.asarray(positions, idx_dtype).tobytes()),
+                                               componentType=index_component),
+                                           values=gl.AccessorSparseValues(bufferView=self._view(values.tobytes()))))
+        if base is not None:
+            acc.bufferView = self._view(np.asarray(base, np.float32).reshape(count, width).tobytes())
+        self.doc.accessors.append(acc)
+        return len(self.doc.accessors) - 1
+
+    def material(self, colour, metallic=0.0, roughness=0.5, texture=None, name=None):
+        """A pbrMetallicRoughness material; texture: (png bytes, texCoord,
+        KHR_texture_transform dict or None), the image stored in the buffer."""
+        pbr = gl.PbrMetallicRoughness(baseColorFactor=[*colour, 1.0], metallicFactor=metallic,
+                                      roughnessFactor=roughness)
+        if texture is not None:
+            png, texcoord, transform = texture
+            self.doc.images.append(gl.Image(bufferView=self._view(png), mimeType="image/png"))
+            self.doc.textures.append(gl.Texture(source=len(self.doc.images) - 1))
+            pbr.baseColorTexture = gl.TextureInfo(index=len(self.doc.textures) - 1, texCoord=texcoord,
+                                                  extensions={"KHR_texture_transform": transform}
+                                                  if transform else {})
+        self.doc.materials.append(gl.Material(pbrMetallicRoughness=pbr, name=name))
+        return len(self.doc.materials) - 1
+
     def mesh(self, positions, indices, targets=(), weights=None, joints=None, skin_weights=None):
         attrs = gl.Attributes(POSITION=self.accessor(positions))
         if joints is not None:

@@ -21,12 +21,22 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
     return RenderConfig(**base)
 
 
+def _read_texture_bytes(data: bytes, suffix: str, space: str):
+    """A texture stored inside a scene file (a .glb's image): decoded from a
+    temporary file, since OpenImageIO reads files."""
+    import tempfile
+    with tempfile.NamedTemporaryFile(suffix=suffix) as f:
+        f.write(data)
+        f.flush()
+        return read_texture(f.name, space)
+
+
 def shading_of(scene: AnimatedScene) -> Shading:
     """Materials, lights and textures as flat arrays; textures loaded once."""
     texels, info, offset = [], [], 0
     for path, space, key in zip(scene.texture_paths, scene.texture_spaces, scene.texture_keys):
         try:
-            img = read_texture(path, space)
+            img = read_texture(path, space) if not isinstance(path, tuple) else _read_texture_bytes(*path, space)
         except OSError as exc:
             raise SceneError(scene.path, key, f"cannot read texture: {exc}") from None
         h, w = img.shape[:2]
