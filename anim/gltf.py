@@ -426,6 +426,12 @@ class GltfObject:
     def static(self):
         return not self.channels
 
+    @property
+    def rigid(self):
+        """Moved by node transforms only (no skin, no morph weights)."""
+        return self.static or (all(i["skin"] is None for i in self.instances)
+                               and not any(path == "weights" for _, path, _ in self.channels))
+
     def place(self, t, out, transform=None):
         """Posed vertices at time t into out (n, 3) f32; `transform` (3, 4) on top."""
         t = wrap_time(t, self.t0, self.t1, self.extrapolate)

@@ -21,6 +21,7 @@ from .mesh_io import load_mesh, vertex_lines
 from .rig import Skeleton
 from .rigid_batch import RigidBatch
 from .schema import SceneFile, parse_scene
+from .usd import UsdObject, is_usd, scene_of_stage
 from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from .vertex_kernels import skin_into, transform_into
 
@@ -59,8 +60,21 @@ _UniqueKeyLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-def read_scene_file(path) -> SceneFile:
+def read_scene_file(path, camera=None, notes=None) -> SceneFile:
+    """The validated scene of a scene file, or of a whole USD stage (with
+    `camera`, a camera prim path; what the stage gave appended to notes)."""
     path = Path(path)
+    if is_usd(path):
+        data, usd_notes = scene_of_stage(path, camera)
+        if notes is not None:
+            notes.extend(usd_notes)
+        try:
+            return parse_scene(data)
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            raise SceneError(path, _key_path(err["loc"]) or "(top)", f"from the stage: {err['msg']}") from None
+    if camera is not None:
+        raise SceneError(path, "--camera", "chooses a camera of a USD stage; this is a scene file")
     try:
         text = path.read_text()
     except FileNotFoundError:
@@ -101,7 +115,7 @@ class SceneObject:
         key = f"objects.{index}"
         owner = f"object {spec.name!r}"
         self.name = spec.name
-        self.curve = self.skeleton = self.gltf = None
+        self.curve = self.skeleton = self.gltf = self.usd = None
         self.translation = self.rotation = self.scale = None
         if spec.keyframes is not None:
             times = check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes", owner)
@@ -131,6 +145,9 @@ class SceneObject:
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
                                    warnings)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
+        elif is_usd(spec.mesh):
+            self.usd = UsdObject(base / spec.mesh, spec.prim, scene_path, f"{key}.mesh")
+            self.base, self.faces, self.uvs = self.usd.rest.astype(np.float32), self.usd.faces, self.usd.uvs
         else:
             self.base, self.faces, self.uvs = load_mesh(base / spec.mesh, scene_path, f"{key}.mesh")
             if spec.skeleton is not None:
@@ -147,10 +164,11 @@ class SceneObject:
                 self.rotation = rotation_curve(tr.rotation, scene_path, f"{key}.transform.rotation", owner,
                                                spec.extrapolate, warnings)
         self.has_transform = any(c is not None for c in (self.translation, self.rotation, self.scale))
-        self.rigid = self.curve is None and self.skeleton is None and (self.gltf is None or self.gltf.static)
+        self.file = self.gltf if self.gltf is not None else self.usd   # a file that brings its own motion and materials
+        self.rigid = self.curve is None and self.skeleton is None and (self.file is None or self.file.rigid)
         self.static = (self.curve is None
                        and (self.skeleton is None or self.skeleton.constant)
-                       and (self.gltf is None or self.gltf.static)
+                       and (self.file is None or self.file.static)
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
 
     def place(self, t, out):
@@ -159,8 +177,8 @@ class SceneObject:
             self.curve.eval_into(t, out)
             return
         top = trs_matrix(self.translation, self.rotation, self.scale, t) if self.has_transform else None
-        if self.gltf is not None:
-            self.gltf.place(t, out, top)
+        if self.file is not None:
+            self.file.place(t, out, top)
         elif self.skeleton is not None:
             mats = self.skeleton.matrices(t)
             if top is not None:
@@ -175,9 +193,13 @@ class SceneObject:
 class AnimatedScene:
     """Loads and checks a scene file; evaluates geometry and camera at time t."""
 
-    def __init__(self, path):
+    def __init__(self, path, camera=None):
+        """camera: for a USD stage, the path of the camera prim to render
+        through (default: its first camera)."""
         self.path = Path(path)
-        self.spec = read_scene_file(self.path)
+        self.camera_choice = camera
+        self.notes = []            # what a USD stage gave and what came from defaults (`check`)
+        self.spec = read_scene_file(self.path, camera, self.notes)
         spec = self.spec
         # materials: the file's, plus a default for objects that name none
         self.material_names = list(spec.materials)
@@ -215,9 +237,9 @@ class AnimatedScene:
             obj.offset = offset
             obj.face_offset = sum(len(f) for f in faces)
             mat = self.material_names.index(o.material) if o.material else default_material
-            if obj.gltf is not None and o.material is None and obj.gltf.materials:
+            if obj.file is not None and o.material is None and obj.file.materials:
                 # the file's own materials, per primitive; `material:` overrides them all
-                face_mat = self._gltf_materials(obj.gltf, i, default_material)
+                face_mat = self._file_materials(obj.file, i, default_material)
                 textured = any(self.materials[m]["texture_index"] >= 0 for m in np.unique(face_mat))
             else:
                 face_mat = np.full(len(obj.faces), mat, np.int32)
@@ -242,7 +264,7 @@ class AnimatedScene:
                 obj.place(0.0, self.vertices[obj.offset:obj.offset + len(obj.base)])
         self.moving = [o for o in self.objects if not o.static]
         # rigid movers are placed together (anim/rigid_batch.py), the rest one by one
-        rigid = [o for o in self.moving if o.rigid and o.gltf is None]
+        rigid = [o for o in self.moving if o.rigid and o.file is None]
         self.rigid_batch = RigidBatch(rigid) if rigid else None
         self.one_by_one = [o for o in self.moving if o not in rigid]
         self._camera_curve = None
@@ -265,8 +287,8 @@ class AnimatedScene:
             self.warnings.append("no lights: surfaces get the ambient term only")
         self._warn_outside_keys()
 
-    def _gltf_materials(self, gltf, index, default_material):
-        """Material rows for a glTF object's own materials (appended to
+    def _file_materials(self, gltf, index, default_material):
+        """Material rows for a glTF or USD object's own materials (appended to
         self.materials, textures registered); (n_t,) i32 row per triangle,
         the default material where a primitive has none."""
         rows = {}

@@ -8,7 +8,8 @@ Extensions beyond the spec's example (all optional, backward compatible):
 `render.ambient`, `render.grid_density`, lights of `type: directional`,
 more interpolation methods (anim/interpolate.py), rotation tracks with
 `slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
-glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`.
+glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`, USD stages as
+`mesh:` with `prim:`.
 """
 import json
 import re
@@ -229,6 +230,7 @@ class Object(Strict):
     keyframes: Optional[List[Keyframe]] = None
     skeleton: Optional[Skeleton] = None
     animation: Optional[Union[int, str, Annotated[List[Union[int, str]], Field(min_length=1)]]] = None
+    prim: Optional[str] = None
     interpolation: Interp = "linear"
     extrapolate: Literal["clamp", "loop"] = "clamp"
 
@@ -243,6 +245,11 @@ class Object(Strict):
             raise ValueError("'animation' selects an animation of a .gltf/.glb mesh")
         if is_gltf and self.skeleton is not None:
             raise ValueError("a glTF file brings its own skins; 'skeleton' is for other meshes")
+        is_usd = self.mesh is not None and self.mesh.lower().endswith((".usd", ".usda", ".usdc", ".usdz"))
+        if self.prim is not None and not is_usd:
+            raise ValueError("'prim' selects a prim of a USD stage (.usd, .usda, .usdc, .usdz)")
+        if is_usd and self.skeleton is not None:
+            raise ValueError("a USD stage brings its own skeletons; 'skeleton' is for other meshes")
         if self.keyframes is not None and len(self.keyframes) == 0:
             raise ValueError("keyframes is empty")
         return self

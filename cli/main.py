@@ -132,10 +132,11 @@ def main():
     """
 
 
-def load_scene(path):
-    """AnimatedScene of path, its warnings printed on stderr."""
+def load_scene(path, camera=None):
+    """AnimatedScene of path (a scene file or a USD stage), its warnings
+    printed on stderr."""
     from anim.scene import AnimatedScene
-    scene = AnimatedScene(path)
+    scene = AnimatedScene(path, camera)
     for message in scene.warnings:
         click.echo(f"frustrace: warning: {message}", err=True)
     return scene
@@ -187,8 +188,12 @@ def parse_frames(text, scene):
     return range(start, end + 1)
 
 
+CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the stage's first camera)."
+
+
 @main.command()
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--camera", metavar="PRIM", help=CAMERA_HELP)
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
@@ -225,10 +230,11 @@ def parse_frames(text, scene):
 @click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
-def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads, no_shadows, spp, max_error,
+def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet, threads, no_shadows, spp, max_error,
            stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
            tls_ca, tls_cert, tls_key):
-    """Render ANIM_YAML to one OpenEXR file per frame, plus stats.json."""
+    """Render ANIM_YAML (a scene file, or a USD stage: .usd, .usda, .usdc,
+    .usdz) to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
     if workers and scheduler:
@@ -240,7 +246,7 @@ def render(anim_yaml, out_dir, frames_text, accel, shadow_accel, packet, threads
 
     from .report import progress, summary_table
 
-    scene = load_scene(anim_yaml)
+    scene = load_scene(anim_yaml, camera)
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too
@@ -524,15 +530,17 @@ def assets_make(name, out_dir, preview_path, overwrite):
 
 @main.command()
 @click.argument("anim_yaml", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--camera", metavar="PRIM", help=CAMERA_HELP)
 @click.option("--strict", is_flag=True,
               help="Also reject file references that leave the scene's directory (absolute paths, "
                    "'..'): a scene shipped to other machines takes its directory only.")
-def check(anim_yaml, strict):
+def check(anim_yaml, camera, strict):
     """Validate ANIM_YAML (schema, meshes, keys, camera at every frame,
     textures) and summarise it; render nothing. What passes here, `render`
-    accepts."""
+    accepts. A USD stage is described: what came from it, what from
+    frustrace's defaults."""
     from anim.render.settings import shading_of
-    scene = load_scene(anim_yaml)
+    scene = load_scene(anim_yaml, camera)
     if strict and scene.outside_paths:
         key, ref = scene.outside_paths[0]
         raise SceneError(anim_yaml, key, f"{ref!r} lies outside the scene's directory (--strict)")
@@ -550,6 +558,8 @@ def check(anim_yaml, strict):
     for o in scene.objects:
         kind = "static" if o.static else ("rigid" if o.rigid else "deforming")
         click.echo(f"    {o.name}: {_count(len(o.faces), 'triangle')}, {kind}")
+    for note in scene.notes:
+        click.echo(f"  {note}")
 
 
 def _count(n, one, many=None):

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from anim.errors import SceneError
+from anim.usd import is_usd
 
 # the worker's scenes: bundle digest -> WorkerScene (kept between tasks)
 _WORKER_SCENES = {}
@@ -37,6 +38,7 @@ class Bundle(NamedTuple):
     scene_name: str
     files: dict
     digest: str
+    camera: str = None        # a USD stage's chosen camera (render --camera)
 
 
 def referenced_files(scene) -> list:
@@ -50,11 +52,15 @@ def referenced_files(scene) -> list:
     spec, base = scene.spec, scene.path.parent
     refs = [("", scene.path.name)]
     refs += [(f"materials.{n}.texture", m.texture) for n, m in spec.materials.items() if m.texture]
+    usd_done = set()
     for i, o in enumerate(spec.objects):
         if o.mesh:
             refs.append((f"objects.{i}.mesh", o.mesh))
             if o.mesh.lower().endswith(".gltf"):
                 refs += [(f"objects.{i}.mesh", uri) for uri in _gltf_uris(base / o.mesh, o.mesh)]
+            if is_usd(o.mesh) and o.mesh not in usd_done:       # a stage's objects share its files
+                usd_done.add(o.mesh)
+                refs += [(f"objects.{i}.mesh", ref) for ref in _usd_files(base, o.mesh, scene.path, i)]
         for j, k in enumerate(o.keyframes or []):
             refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
         if o.skeleton:
@@ -80,6 +86,20 @@ def _gltf_uris(path: Path, ref: str) -> list:
     return [os.path.join(folder, unquote(u)) for u in uris if u and not u.startswith("data:")]
 
 
+def _usd_files(base: Path, ref: str, scene_path, index) -> list:
+    """The layers and assets (textures) a USD stage reads, relative to the scene."""
+    from anim.usd import dependencies
+    out = []
+    root = base.resolve()
+    for dep in dependencies(base / ref):
+        dep = dep.resolve()
+        if not dep.is_relative_to(root):
+            raise SceneError(scene_path, f"objects.{index}.mesh", f"{ref} reads {dep}, which lies outside the "
+                                                                   "scene's directory, so it cannot be sent to the workers")
+        out.append(str(dep.relative_to(root)))
+    return out
+
+
 def bundle_scene(scene) -> Bundle:
     """The scene file and every file it references, read once on the client."""
     files = {}
@@ -92,7 +112,8 @@ def bundle_scene(scene) -> Bundle:
     for ref in sorted(files):
         h.update(ref.encode())
         h.update(hashlib.sha256(files[ref]).digest())
-    return Bundle(scene.path.name, files, h.hexdigest()[:16])
+    h.update(str(scene.camera_choice).encode())
+    return Bundle(scene.path.name, files, h.hexdigest()[:16], scene.camera_choice)
 
 
 class WorkerScene(NamedTuple):
@@ -118,7 +139,7 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
         target = root / ref
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(data)
-    scene = AnimatedScene(root / bundle.scene_name)
+    scene = AnimatedScene(root / bundle.scene_name, bundle.camera)
     cfg = RenderConfig(**cfg_fields)
     shading = shading_of(scene)
     compile_s = warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]))

@@ -1,0 +1,181 @@
+"""USD stages through usd-core (issue 22): skinned and blend-shaped meshes
+against usd-core's own baked evaluation (UsdSkel.BakeSkinning, a separate
+code path from the queries frustrace uses), time-sampled points and
+transforms against numpy, a whole stage rendered with its own camera and
+lights, and bad stages as one-line errors."""
+import math
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+pxr = pytest.importorskip("pxr")
+from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt  # noqa: E402
+
+from anim.scene import AnimatedScene  # noqa: E402
+from cli.main import main  # noqa: E402
+from usd_files import mesh, new_stage, shot, skinned_character, tube  # noqa: E402
+
+
+def _scene(tmp_path, mesh_name, extra="", fps=24, end=10):
+    path = tmp_path / "s.yaml"
+    path.write_text(f"""version: 1
+frames: {{start: 0, end: {end}, fps: {fps}}}
+output: {{path: out/f_#.exr, resolution: [48, 48]}}
+camera: {{eye: [1, -6, 1], look_at: [1, 0, 0], up: [0, 0, 1]}}
+lights: [{{position: [2, -3, 6], intensity: 20}}]
+objects:
+  - name: thing
+    mesh: {mesh_name}
+{extra}""")
+    return path
+
+
+def _baked(path, tmp_path, times):
+    """World-space points of /Char/Tube at each time code, by usd-core's
+    BakeSkinning on a copy of the stage."""
+    copy = tmp_path / "baked.usda"
+    shutil.copy(path, copy)
+    stage = Usd.Stage.Open(str(copy))
+    assert UsdSkel.BakeSkinning(stage.Traverse(), Gf.Interval(min(times), max(times)))
+    prim = stage.GetPrimAtPath("/Char/Tube")
+    out = []
+    for tc in times:
+        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(tc), np.float64)
+        m = np.array(UsdGeom.XformCache(tc).GetLocalToWorldTransform(prim)).reshape(4, 4)
+        out.append(pts @ m[:3, :3] + m[3, :3])
+    return out
+
+
+def test_skinned_blend_shaped_mesh_matches_usd_cores_own_bake(tmp_path):
+    skinned_character(tmp_path / "char.usda")
+    scene = AnimatedScene(_scene(tmp_path, "char.usda"))
+    assert not scene.objects[0].static and len(scene.faces) == 2 * 10 * 4
+    times = [0, 3, 5, 7, 10]
+    for tc, want in zip(times, _baked(tmp_path / "char.usda", tmp_path, times)):
+        got = scene.vertices_at(tc / 24.0)                     # 24 time codes per second
+        np.testing.assert_allclose(got, want, atol=2e-6)
+    # the motion is real: the tip moved and bulged
+    first, last = scene.vertices_at(0.0).copy(), scene.vertices_at(10 / 24).copy()
+    assert np.abs(last - first).max() > 1.0
+
+
+def test_time_sampled_points_and_transform_with_other_time_code_rate(tmp_path):
+    """Points keyed at time codes 0 and 48, translate and rotateZ ops keyed
+    too, 48 time codes per second: scene time t is time code 48 t."""
+    stage = new_stage(tmp_path / "deform.usda", tcps=48.0, end=48)
+    pts, counts, idx = tube(n_along=3)
+    UsdGeom.Xform.Define(stage, "/Root")
+    m = mesh(stage, "/Root/Blob", pts, counts, idx)
+    moved = pts * np.array([1.0, 2.0, 0.5], np.float32)
+    m.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts), 0)
+    m.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(moved), 48)
+    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/Root"))
+    t_op, r_op = xf.AddTranslateOp(), xf.AddRotateZOp()
+    t_op.Set(Gf.Vec3d(0, 0, 0), 0)
+    t_op.Set(Gf.Vec3d(2, 0, 0), 48)
+    r_op.Set(0.0, 0)
+    r_op.Set(90.0, 48)
+    stage.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "deform.usda"))
+    for t in (0.0, 0.25, 0.5, 1.0, 1.5):
+        s = min(t, 1.0)
+        p = pts + s * (moved - pts)
+        a = math.radians(90 * s)
+        rot = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+        np.testing.assert_allclose(scene.vertices_at(t), p @ rot.T + [2 * s, 0, 0], atol=2e-6)
+
+
+def test_prim_selects_a_subtree_and_static_meshes_are_static(tmp_path):
+    shot(tmp_path / "shot.usda")
+    scene = AnimatedScene(_scene(tmp_path, "shot.usda", "    prim: /World/Ground\n"))
+    assert scene.objects[0].static and len(scene.faces) == 2
+    scene = AnimatedScene(_scene(tmp_path, "shot.usda", "    prim: /World/Box\n"))
+    assert not scene.objects[0].static
+
+
+def test_whole_stage_renders_with_its_camera_lights_and_materials(tmp_path):
+    shot(tmp_path / "shot.usda")
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
+    assert res.exit_code == 0, res.output
+    for words in ("upAxis Y", "metersPerUnit", "frames 0..2 at 24 fps", "camera /World/Cam", "3 light(s)",
+                  "/World/Ground: 2 triangles, static", "/World/Box: 2 triangles, rigid"):
+        assert words in res.output, (words, res.output)
+    scene = AnimatedScene(tmp_path / "shot.usda")
+    spec = scene.spec
+    # camera: focal length 50, vertical aperture 24 -> 2 atan(12 / 50); 36 x 24 -> 3:2
+    assert spec.camera.fov == pytest.approx(math.degrees(2 * math.atan(12 / 50)))
+    assert tuple(spec.output.resolution) == (512, 341)
+    kinds = sorted(light.type for light in spec.lights)
+    assert kinds == ["area", "directional", "point"]
+    point = next(light for light in spec.lights if light.type == "point")
+    assert point.position == (2.0, 3.0, 4.0) and point.intensity == pytest.approx(10 * 2 * math.pi * 0.25)
+    sun = next(light for light in spec.lights if light.type == "directional")
+    np.testing.assert_allclose(sun.direction, [0, -1, 0], atol=1e-9)
+    area = next(light for light in spec.lights if light.type == "area")
+    assert area.intensity == pytest.approx(3.0 * 2.0)
+    # the box slides from x = -1 to 1 over time codes 0..4 = frames 0..2
+    for frame, x in ((0, -1.0), (1, 0.0), (2, 1.0)):
+        v = scene.vertices_at(scene.time_of(frame))[4:]
+        np.testing.assert_allclose(v[:, 0].mean(), x, atol=1e-6)
+    out = tmp_path / "frames"
+    res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(out), "--res", "64x48",
+                                    "--quiet"])
+    assert res.exit_code == 0, res.output
+    from raycore.image_io import read_exr
+    names, pix, _ = read_exr(str(out / "frame_0001.exr"))
+    z = pix[..., names.index("Z")]
+    assert z[24, 32] == pytest.approx(6.0, rel=1e-5)            # the box at the centre, 6 in front
+    r, g = pix[..., names.index("R")], pix[..., names.index("G")]
+    assert r[44, 5] > 3 * g[44, 5] > 0                           # the red ground, lit
+
+
+def test_camera_option_and_a_stage_without_camera_or_lights(tmp_path):
+    shot(tmp_path / "shot.usda", camera=False, lights=False)
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
+    assert res.exit_code == 0, res.output
+    assert "no camera in the stage" in res.output and "no lights" in res.output
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda"), "--camera", "/World/Nope"])
+    assert res.exit_code == 2 and "--camera" in res.output and "/World/Nope" in res.output
+
+
+def _check_line(path):
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2, res.output
+    assert len(res.output.strip().splitlines()) == 1, res.output
+    return res.output
+
+
+def test_bad_stages_are_one_line_errors(tmp_path):
+    (tmp_path / "broken.usda").write_text("#usda 1.0\ndef Mesh \"M\" {\n  point3f[] points = [(0, 0\n")
+    out = _check_line(_scene(tmp_path, "broken.usda"))
+    assert "objects.0.mesh" in out and "broken.usda" in out
+    shot(tmp_path / "shot.usda")
+    out = _check_line(_scene(tmp_path, "shot.usda", "    prim: /World/Nothing\n"))
+    assert "objects.0.prim" in out and "/World/Nothing" in out
+    stage = new_stage(tmp_path / "empty.usda")
+    UsdGeom.Mesh.Define(stage, "/M")
+    stage.GetRootLayer().Save()
+    out = _check_line(_scene(tmp_path, "empty.usda"))
+    assert "/M" in out and "no points" in out
+    stage = new_stage(tmp_path / "unbound.usda")
+    pts, counts, idx = tube(n_along=2)
+    m = mesh(stage, "/Rig/Body", pts, counts, idx)
+    b = UsdSkel.BindingAPI.Apply(m.GetPrim())
+    b.CreateSkeletonRel().SetTargets(["/Rig/Missing"])
+    b.CreateJointIndicesPrimvar(False, 1).Set(Vt.IntArray([0] * len(pts)))
+    b.CreateJointWeightsPrimvar(False, 1).Set(Vt.FloatArray([1.0] * len(pts)))
+    stage.GetRootLayer().Save()
+    out = _check_line(_scene(tmp_path, "unbound.usda"))
+    assert "/Rig/Body" in out and "/Rig/Missing" in out
+    stage = new_stage(tmp_path / "inst.usda")
+    mesh(stage, "/Proto/M", pts, counts, idx)
+    ref = stage.DefinePrim("/Copy")
+    ref.GetReferences().AddInternalReference("/Proto")
+    ref.SetInstanceable(True)
+    stage.GetRootLayer().Save()
+    out = _check_line(_scene(tmp_path, "inst.usda"))
+    assert "/Copy" in out and "instance" in out
+    out = _check_line(_scene(tmp_path, "char.usda"))
+    assert "not found" in out
