@@ -250,6 +250,11 @@ class AnimatedScene:
             uvs.append((obj.uvs, len(obj.base)))
             offset += len(obj.base)
             self.objects.append(obj)
+        if is_usd(self.path):
+            plain = [o.name for o in self.objects if o.file is not None and not o.file.materials]
+            if plain:
+                self.notes.append(f"{len(plain)} mesh(es) without a UsdPreviewSurface material get frustrace's "
+                                  f"default material (first: {plain[0]})")
         self.n_vertices = offset
         self.faces = np.ascontiguousarray(np.concatenate(faces) if faces else np.zeros((0, 3), np.int32), np.int32)
         self.tri_material = np.concatenate(mats) if mats else np.zeros(0, np.int32)

@@ -486,6 +486,8 @@ def scene_of_stage(path, camera=None):
             eye, look, up, fov, aspect = _camera_at(cam_prim, pxr.Usd.TimeCode(f / fps * tcps), pxr)
             keys.append({"t": f / fps, "eye": _vec(eye), "look_at": _vec(look), "up": _vec(up), "fov": fov})
         height = max(1, round(width / aspect))
+        notes.append(f"resolution {width}x{height}: frustrace's default width, the camera's aperture aspect "
+                     "(render --res to change it)")
         still = all({k: v for k, v in key.items() if k != "t"} == {k: v for k, v in keys[0].items() if k != "t"}
                     for key in keys)
         cam = ({k: keys[0][k] for k in ("eye", "look_at", "up", "fov")} if still

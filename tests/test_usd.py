@@ -179,3 +179,37 @@ def test_bad_stages_are_one_line_errors(tmp_path):
     assert "/Copy" in out and "instance" in out
     out = _check_line(_scene(tmp_path, "char.usda"))
     assert "not found" in out
+
+
+def test_preview_surface_texture_with_face_varying_st_and_the_cluster_bundle(tmp_path):
+    """A UsdUVTexture on diffuseColor: the image read sRGB, face-varying st
+    splitting points only along the seam; the stage's files (a sublayer, the
+    texture) travel in the cluster bundle."""
+    from pxr import Sdf, UsdShade
+    from anim.render.cluster import referenced_files
+    from anim.render.settings import shading_of
+    from raycore.image_io import _write_8bit
+    _write_8bit(str(tmp_path / "checker.png"), np.array([[[255, 255, 255], [0, 0, 0]]], np.uint8))
+    layer = new_stage(tmp_path / "geo.usda")
+    pts = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]]
+    m = mesh(layer, "/Geo/Strip", pts, [4, 4], [0, 1, 4, 3, 1, 2, 5, 4])
+    st = UsdGeom.PrimvarsAPI(m.GetPrim()).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                        UsdGeom.Tokens.faceVarying)
+    # the second quad's st restarts at 0: points 1 and 4 are split along that seam
+    st.Set(Vt.Vec2fArray([(0, 0), (1, 0), (1, 1), (0, 1), (0, 0), (1, 0), (1, 1), (0, 1)]))
+    from usd_files import preview_material
+    mat = preview_material(layer, "/Geo/Looks/Check", (1, 1, 1), texture="checker.png")
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+    layer.GetRootLayer().Save()
+    top = new_stage(tmp_path / "top.usda")
+    top.GetRootLayer().subLayerPaths.append("geo.usda")
+    top.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "top.usda"))
+    assert scene.n_vertices == 8 and scene.faces.shape == (4, 3)          # 6 points, 2 split at the seam
+    corner_uv = {(tuple(np.round(scene.vertices_at(0.0)[v], 6)), tuple(scene.uvs[v])) for v in scene.faces.ravel()}
+    assert ((1.0, 0.0, 0.0), (1.0, 0.0)) in corner_uv and ((1.0, 0.0, 0.0), (0.0, 0.0)) in corner_uv
+    shading = shading_of(scene)
+    assert shading.tex_info.tolist() == [[0, 2, 1]]
+    np.testing.assert_allclose(shading.tex_data[:6], [1, 1, 1, 0, 0, 0], atol=1e-6)
+    refs = {ref for _, ref in referenced_files(scene)}
+    assert {"s.yaml", "top.usda", "geo.usda", "checker.png"} <= refs
