@@ -22,6 +22,7 @@ from .errors import SceneError
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 _STAGES = {}          # resolved path -> (mtime, Stage, UsdSkel.Cache): one open per file
+_SKINNED = {}         # id(stage) -> (stage, its skinned meshes)
 
 
 def is_usd(name) -> bool:
@@ -283,7 +284,11 @@ def material_of(material, scene_path, key):
 
 
 def _skinning_targets(stage, cache, pxr):
-    """Mesh prim path -> (SkelQuery, SkinningQuery) for every skinned mesh."""
+    """Mesh prim path -> (SkelQuery, SkinningQuery) for every skinned mesh;
+    found once per stage (a whole-stage scene has an object per mesh)."""
+    key = id(stage)
+    if _SKINNED.get(key, (None,))[0] is stage:
+        return _SKINNED[key][1]
     targets = {}
     for prim in stage.Traverse():
         if not prim.IsA(pxr.UsdSkel.Root):
@@ -296,6 +301,7 @@ def _skinning_targets(stage, cache, pxr):
                 continue
             for skin_query in binding.GetSkinningTargets():
                 targets[str(skin_query.GetPrim().GetPath())] = (skel_query, skin_query)
+    _SKINNED[key] = (stage, targets)
     return targets
 
 
