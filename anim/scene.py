@@ -250,6 +250,11 @@ class AnimatedScene:
             uvs.append((obj.uvs, len(obj.base)))
             offset += len(obj.base)
             self.objects.append(obj)
+        subdivided = [(i, p) for i, o in enumerate(self.objects) if o.usd is not None for p in o.usd.subdivided]
+        if subdivided:
+            self.warnings.append(f"objects.{subdivided[0][0]}.mesh: {len(subdivided)} USD mesh(es) ask for a "
+                                 f"subdivision surface (subdivisionScheme, catmullClark when unset; first: "
+                                 f"{subdivided[0][1]}); frustrace renders their polygons as authored")
         if is_usd(self.path):
             plain = [o.name for o in self.objects if o.file is not None and not o.file.materials]
             if plain:

@@ -351,6 +351,9 @@ class UsdObject:
         skinned = _skinning_targets(self.stage, cache, pxr)
         self.tcps = self.stage.GetTimeCodesPerSecond() or 24.0
         self.meshes = [_Mesh(p, skinned.get(str(p.GetPath())), scene_path, key, need_uvs) for p in prims]
+        # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
+        self.subdivided = [m.path for m in self.meshes
+                           if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
         offsets = np.cumsum([0] + [m.n_vertices for m in self.meshes])
         self.offsets = offsets
         self.faces = np.ascontiguousarray(np.concatenate([m.faces + o for m, o in zip(self.meshes, offsets)]),

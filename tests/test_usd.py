@@ -213,3 +213,17 @@ def test_preview_surface_texture_with_face_varying_st_and_the_cluster_bundle(tmp
     np.testing.assert_allclose(shading.tex_data[:6], [1, 1, 1, 0, 0, 0], atol=1e-6)
     refs = {ref for _, ref in referenced_files(scene)}
     assert {"s.yaml", "top.usda", "geo.usda", "checker.png"} <= refs
+
+
+def test_meshes_that_ask_for_subdivision_are_one_warning(tmp_path):
+    shot(tmp_path / "shot.usda")           # its meshes leave subdivisionScheme unset: catmullClark
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
+    assert res.exit_code == 0
+    lines = [line for line in res.output.splitlines() if "subdivision" in line]
+    assert len(lines) == 1 and "2 USD mesh(es)" in lines[0] and "/World/Ground" in lines[0]
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    for path in ("/World/Ground", "/World/Box"):
+        UsdGeom.Mesh(stage.GetPrimAtPath(path)).CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    stage.GetRootLayer().Save()
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
+    assert res.exit_code == 0 and "subdivision" not in res.output
