@@ -32,7 +32,6 @@ of rounding noise divided by 1e-9, would leak through the tangents of every
 smooth method and blow up the neighbouring segments.
 """
 import numpy as np
-from scipy.spatial.transform import Rotation, RotationSpline, Slerp
 
 from .vertex_kernels import horner_into
 
@@ -236,6 +235,9 @@ class RotationCurve:
     rotation vector. Breaks (see module doc) are slerped."""
 
     def __init__(self, times, quats_wxyz, method="slerp", extrapolate="clamp"):
+        # imported here, by the scenes with rotation tracks: scipy.spatial
+        # costs ~0.3 s of every start otherwise
+        from scipy.spatial.transform import Rotation, RotationSpline, Slerp
         q = np.asarray(quats_wxyz, np.float64)
         self.quats = q
         self.times = np.asarray(times, np.float64)

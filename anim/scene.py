@@ -15,7 +15,6 @@ from pydantic import ValidationError
 
 from .area_lights import emitter_positions
 from .errors import SceneError
-from .gltf import GltfObject
 from .interpolate import Curve
 from .mesh_io import load_mesh, vertex_lines
 from .rig import Skeleton
@@ -142,6 +141,7 @@ class SceneObject:
                 if self.curve.constant:
                     self.curve = None
         elif spec.mesh.lower().endswith((".gltf", ".glb")):
+            from .gltf import GltfObject          # pygltflib only for scenes with glTF files
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
                                    warnings)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs

@@ -2,7 +2,6 @@
 (quaternions) and joint angles, with their checks. Errors name the key path;
 quaternions that were not unit length are normalised with a warning."""
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from .errors import SceneError
 from .interpolate import METHODS, Curve, RotationCurve, normalized_quaternions
@@ -80,6 +79,7 @@ class AngleCurve:
         self.constant = self.curve.constant
 
     def __call__(self, t):
+        from scipy.spatial.transform import Rotation      # lazily: see anim/interpolate.py
         return Rotation.from_euler(self.order, self.curve(t), degrees=True).as_matrix()
 
 
