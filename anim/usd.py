@@ -231,6 +231,14 @@ def _bound_materials(prim, n_faces, poly, scene_path, key):
         faces = np.asarray(subset.GetIndicesAttr().Get() or [], np.int64)
         faces = faces[(faces >= 0) & (faces < n_faces)]
         per_face[faces] = slot(UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0])
+    if np.any(per_face < 0):
+        # no material: a constant displayColor is the colour USD viewers show
+        colour = pxr.UsdGeom.Gprim(prim).GetDisplayColorPrimvar().ComputeFlattened()
+        if colour is not None and len(colour) == 1:
+            rgb = tuple(float(min(max(c, 0.0), 1e6)) for c in colour[0])
+            found.append({"name": f"displayColor {rgb}", "diffuse": rgb, "specular": 0.0, "shininess": 32.0,
+                          "texture": None, "texture_space": "auto", "uv_set": "st"})
+            per_face[per_face < 0] = len(found) - 1
     return per_face[poly], found
 
 

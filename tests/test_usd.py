@@ -227,3 +227,17 @@ def test_meshes_that_ask_for_subdivision_are_one_warning(tmp_path):
     stage.GetRootLayer().Save()
     res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
     assert res.exit_code == 0 and "subdivision" not in res.output
+
+
+def test_a_constant_display_colour_is_the_colour_without_a_material(tmp_path):
+    stage = new_stage(tmp_path / "plain.usda")
+    pts, counts, idx = tube(n_along=2)
+    m = mesh(stage, "/Green", pts, counts, idx)
+    m.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(0.1, 0.7, 0.2)]))
+    mesh(stage, "/Plain", pts + np.float32(3), counts, idx)
+    stage.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "plain.usda"))
+    table = scene.material_table[scene.tri_material]
+    n = len(scene.faces) // 2
+    np.testing.assert_allclose(table[:n, :3], [[0.1, 0.7, 0.2]] * n, rtol=1e-6)
+    np.testing.assert_allclose(table[n:, :3], [[0.8, 0.8, 0.8]] * n)          # the default material
