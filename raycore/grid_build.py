@@ -145,9 +145,13 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
     nx, ny, nz = dims[0], dims[1], dims[2]
     n_cells = nx * ny * nz
     ranges = np.empty((6, n), np.int32)
-    hist = np.zeros((n_chunks, n_cells), np.int32)
+    # arrays are zeroed by loops inside the parallel ones: numba compiles an
+    # np.zeros here into a parallel loop of its own (~1.5 s of first compile each)
+    hist = np.empty((n_chunks, n_cells), np.int32)
     # 1. count, one histogram per chunk
     for c in prange(n_chunks):
+        for cell in range(n_cells):
+            hist[c, cell] = 0
         t0 = c * n // n_chunks
         t1 = (c + 1) * n // n_chunks
         _cell_ranges(tri_verts, t0, t1, lo[0], lo[1], lo[2], inv_cell[0], inv_cell[1],
@@ -165,7 +169,7 @@ def _fill(tri_verts, lo, inv_cell, dims, pad, n_chunks):
                         hist[c, row + ix] += 1
     # 2. scan: cell totals, then each chunk's write offset per cell
     cell_start = np.empty(n_cells + 1, np.int32)
-    totals = np.zeros(n_cells, np.int32)
+    totals = np.empty(n_cells, np.int32)
     for cell in prange(n_cells):
         s = 0
         for c in range(n_chunks):
