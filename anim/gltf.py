@@ -23,6 +23,8 @@ from .vertex_kernels import skin_into, transform_into
 _DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _PATHS = ("translation", "rotation", "scale", "weights")
+# geometry stored compressed: without a decoder the accessors would read as zeros or garbage
+_COMPRESSED = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression")
 _NORMALIZE = {np.int8: 127.0, np.uint8: 255.0, np.int16: 32767.0, np.uint16: 65535.0}
 
 
@@ -96,6 +98,10 @@ class GltfObject:
             raise SceneError(scene_path, key, f"cannot read glTF {path}: {exc}") from None
         if self.doc is None:
             raise SceneError(scene_path, key, f"cannot read glTF {path}")
+        for ext in self.doc.extensionsRequired or []:
+            if ext in _COMPRESSED:
+                raise SceneError(scene_path, key, f"{self.path.name}: needs {ext}, which frustrace does not "
+                                                  "read; write the file without it (e.g. gltf-transform copy)")
         try:
             self._buffers = [self._buffer(i, b) for i, b in enumerate(self.doc.buffers)]
             self._nodes()
@@ -322,7 +328,11 @@ class GltfObject:
         doc = self.doc
         source = doc.textures[texture_index].source
         if source is None:
-            self._fail(f"texture {texture_index} has no image source")
+            # the image only through an extension (KHR_texture_basisu, EXT_texture_webp): the
+            # colour factor alone, as a viewer without the extension shows it
+            self.warnings.append(f"{self.key}: {self.path.name}: texture {texture_index} has its image only "
+                                 "in an extension frustrace does not read; its material's colour factor is used")
+            return None
         image = doc.images[source]
         suffix = {"image/png": ".png", "image/jpeg": ".jpg"}.get(image.mimeType or "", ".png")
         if image.uri is None:

@@ -267,3 +267,28 @@ def test_base_colour_texture_with_its_texcoord_set_and_khr_texture_transform(tmp
     shading = shading_of(scene)
     assert shading.tex_info.tolist() == [[0, 2, 1]]
     np.testing.assert_allclose(shading.tex_data[:6], [1, 0, 0, 0, 1, 0], atol=1e-6)   # sRGB 255 -> 1
+
+
+def test_a_texture_whose_image_is_only_in_an_extension_is_a_warning(tmp_path):
+    """KHR_texture_basisu and EXT_texture_webp may leave `source` out: the
+    material's colour factor is used, as by a viewer without the extension."""
+    b = GltfBuilder()
+    mat = b.material([0.2, 0.4, 0.6], texture=(_png(tmp_path, [[[255, 0, 0]]]), 0, None))
+    b.doc.textures[0] = gl.Texture(source=None, extensions={"KHR_texture_basisu": {"source": 0}})
+    prim = gl.Primitive(attributes=gl.Attributes(POSITION=b.accessor(QUAD)),
+                        indices=b.accessor(np.array(QUAD_FACES).reshape(-1, 1), 5125), material=mat)
+    b.doc.meshes.append(gl.Mesh(primitives=[prim]))
+    b.save(tmp_path / "ktx.glb", [b.node(mesh=0)])
+    scene = AnimatedScene(_scene(tmp_path, "ktx.glb"))
+    assert any("extension" in w for w in scene.warnings)
+    row = scene.material_table[scene.tri_material[0]]
+    np.testing.assert_allclose(row[:3], [0.2, 0.4, 0.6], rtol=1e-6)
+    assert row[5] == -1 and scene.texture_paths == []
+
+
+def test_compressed_geometry_is_refused_in_one_line(tmp_path):
+    b = GltfBuilder()
+    b.doc.extensionsUsed = b.doc.extensionsRequired = ["KHR_draco_mesh_compression"]
+    b.save(tmp_path / "draco.glb", [b.node(mesh=b.mesh(QUAD, QUAD_FACES))])
+    res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, "draco.glb"))])
+    assert res.exit_code == 2 and "KHR_draco_mesh_compression" in res.output and "objects.0.mesh" in res.output
