@@ -391,7 +391,7 @@ class GltfObject:
         self.channels = []
         self.t0 = self.t1 = 0.0
         if not doc.animations:
-            if which is not None:
+            if which is not None and which != "all":          # all of none: a still object
                 self._fail(f"animation {which!r} requested, but the file has none")
             return
         chosen = self._chosen(which)

@@ -169,6 +169,9 @@ def test_two_played_animations_on_one_property_are_an_error_naming_both(tmp_path
     res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, "arm.glb", "    animation: all\n"))])
     assert res.exit_code == 2
     assert "'wave'" in res.output and "'point'" in res.output and "rotation" in res.output
+    still = GltfBuilder()
+    still.save(tmp_path / "still.glb", [still.node(mesh=still.mesh(QUAD, QUAD_FACES))])
+    assert AnimatedScene(_scene(tmp_path, "still.glb", "    animation: all\n")).objects[0].static
 
 
 def test_rendered_depth_equals_the_independently_evaluated_mesh(tmp_path):
