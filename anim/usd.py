@@ -516,18 +516,39 @@ def scene_of_stage(path, camera=None):
     lights = _lights(stage, time0, pxr, notes)
     if lights:
         notes.append(f"{len(lights)} light(s) from UsdLux")
+    else:
+        # as USD viewers do (usdview's camera light): a light at the eye, of
+        # the intensity that lights the point looked at with irradiance 1
+        eye = np.array(cam["eye"] if "eye" in cam else cam["keys"][0]["eye"])
+        look = np.array(cam["look_at"] if "look_at" in cam else cam["keys"][0]["look_at"])
+        if cam_prim is not None:
+            look = _bounds_centre(stage, time0, pxr)
+        d2 = float(np.sum((look - eye) ** 2)) or 1.0
+        lights = [{"type": "point", "position": _vec(eye), "intensity": d2}]
+        notes.append("no lights in the stage: a point light at the camera, as USD viewers do")
     data = {"version": 1, "frames": {"start": start, "end": end, "fps": float(fps)},
             "output": {"resolution": [width, height]}, "camera": cam, "lights": lights, "objects": objects}
     return data, notes
 
 
-def _default_camera(stage, time, pxr):
-    """A view of the stage's bounds from the front (along -Y for Z-up, -Z for Y-up)."""
+def _bounds(stage, time, pxr):
+    """(lo, hi) of the stage's renderable bounds at a time code."""
     bbox = pxr.UsdGeom.BBoxCache(time, [pxr.UsdGeom.Tokens.default_, pxr.UsdGeom.Tokens.render])
     box = bbox.ComputeWorldBound(stage.GetPseudoRoot()).ComputeAlignedRange()
     lo, hi = np.array(box.GetMin()), np.array(box.GetMax())
     if box.IsEmpty() or not np.all(np.isfinite(lo)):
         lo, hi = -np.ones(3), np.ones(3)
+    return lo, hi
+
+
+def _bounds_centre(stage, time, pxr):
+    lo, hi = _bounds(stage, time, pxr)
+    return (lo + hi) / 2
+
+
+def _default_camera(stage, time, pxr):
+    """A view of the stage's bounds from the front (along -Y for Z-up, -Z for Y-up)."""
+    lo, hi = _bounds(stage, time, pxr)
     centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
     z_up = pxr.UsdGeom.GetStageUpAxis(stage) == pxr.UsdGeom.Tokens.z
     back = np.array([0, -1, 0]) if z_up else np.array([0, 0, 1])

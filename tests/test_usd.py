@@ -135,7 +135,9 @@ def test_camera_option_and_a_stage_without_camera_or_lights(tmp_path):
     shot(tmp_path / "shot.usda", camera=False, lights=False)
     res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
     assert res.exit_code == 0, res.output
-    assert "no camera in the stage" in res.output and "no lights" in res.output
+    assert "no camera in the stage" in res.output and "a point light at the camera" in res.output
+    spec = AnimatedScene(tmp_path / "shot.usda").spec
+    assert [light.type for light in spec.lights] == ["point"] and spec.lights[0].position == spec.camera.eye
     res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda"), "--camera", "/World/Nope"])
     assert res.exit_code == 2 and "--camera" in res.output and "/World/Nope" in res.output
 
