@@ -269,7 +269,7 @@ def material_of(material, scene_path, key):
         if tex.GetIdAttr().Get() == "UsdUVTexture":
             asset, _ = _input_value(tex, "file")
             if asset is not None and asset.resolvedPath:
-                texture = Path(asset.resolvedPath)
+                texture = _texture_source(asset.resolvedPath, pxr)
             cs, _ = _input_value(tex, "sourceColorSpace")
             space = "linear" if cs == "raw" else ("srgb" if cs == "sRGB" else "auto")
             _, reader = _input_value(tex, "st")
@@ -289,6 +289,19 @@ def material_of(material, scene_path, key):
             "specular": 0.04 + 0.96 * min(max(metallic, 0.0), 1.0),
             "shininess": float(min(max(2.0 / max(roughness, 1e-3) ** 4 - 2.0, 1.0), 1e4)),
             "texture": texture, "texture_space": space, "uv_set": uv_set or "st"}
+
+
+def _texture_source(resolved, pxr):
+    """A texture file's path, or (bytes, suffix) for one inside a package
+    (a .usdz's 'pkg.usdz[textures/a.png]'), read through USD's asset resolver."""
+    if not resolved.endswith("]") or "[" not in resolved:
+        return Path(resolved)
+    inner = resolved[resolved.rindex("[") + 1:-1]
+    asset = pxr.Ar.GetResolver().OpenAsset(pxr.Ar.ResolvedPath(resolved))
+    data = asset.GetBuffer() if asset else None
+    if data is None:
+        return Path(resolved)                 # reading it then names the file in a clear error
+    return bytes(data), Path(inner).suffix or ".png"
 
 
 def _skinning_targets(stage, cache, pxr):
@@ -561,4 +574,6 @@ def dependencies(path) -> list:
     cluster's bundle; absolute paths."""
     from pxr import UsdUtils
     layers, assets, _ = UsdUtils.ComputeAllDependencies(str(path))
-    return [Path(layer.realPath) for layer in layers if layer.realPath] + [Path(a) for a in assets]
+    # a file inside a .usdz ('pkg.usdz[a.png]') travels with its package
+    files = [layer.realPath for layer in layers if layer.realPath] + [str(a) for a in assets]
+    return list(dict.fromkeys(Path(f.split("[", 1)[0]) for f in files))

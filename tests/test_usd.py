@@ -243,3 +243,26 @@ def test_a_constant_display_colour_is_the_colour_without_a_material(tmp_path):
     n = len(scene.faces) // 2
     np.testing.assert_allclose(table[:n, :3], [[0.1, 0.7, 0.2]] * n, rtol=1e-6)
     np.testing.assert_allclose(table[n:, :3], [[0.8, 0.8, 0.8]] * n)          # the default material
+
+
+def test_a_usdz_package_renders_with_the_texture_inside_it(tmp_path):
+    from pxr import Sdf, UsdShade, UsdUtils
+    from anim.render.settings import shading_of
+    from raycore.image_io import _write_8bit
+    from usd_files import preview_material
+    _write_8bit(str(tmp_path / "tex.png"), np.array([[[255, 0, 0], [0, 255, 0]]], np.uint8))
+    stage = new_stage(tmp_path / "loose.usda")
+    m = mesh(stage, "/M", [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [4], [0, 1, 2, 3])
+    UsdGeom.PrimvarsAPI(m.GetPrim()).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                   UsdGeom.Tokens.vertex).Set(Vt.Vec2fArray(
+                                                       [(0, 0), (1, 0), (1, 1), (0, 1)]))
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(preview_material(stage, "/Looks/T", (1, 1, 1),
+                                                                         texture="tex.png"))
+    stage.GetRootLayer().Save()
+    assert UsdUtils.CreateNewUsdzPackage(str(tmp_path / "loose.usda"), str(tmp_path / "pkg.usdz"))
+    (tmp_path / "tex.png").unlink()                    # only the copy inside the package is left
+    scene = AnimatedScene(_scene(tmp_path, "pkg.usdz"))
+    shading = shading_of(scene)
+    np.testing.assert_allclose(shading.tex_data[:6], [1, 0, 0, 0, 1, 0], atol=1e-6)
+    from anim.render.cluster import referenced_files
+    assert {ref for _, ref in referenced_files(scene)} == {"s.yaml", "pkg.usdz"}
