@@ -10,10 +10,10 @@ the files it writes are committed, so the tests never need bpy:
 
 The character: a tube of 640 vertices (32 around, 20 rings, along +z), a
 three-bone armature bending it (Bezier keys), an animated shape key
-bulging its middle. Exports: glTF binary (one animation per action, shape
-keys as sparse accessors: Blender's defaults) and USD (.usdc: UsdSkel
-skeleton, animation and blend shape; the defaults but for "Animation",
-which Blender's USD export leaves off).
+bulging its middle, a Principled BSDF material. Exports: glTF binary (one
+animation per action, shape keys as sparse accessors: Blender's defaults)
+and USD (.usdc: UsdSkel skeleton, animation and blend shape; the defaults
+but for "Animation", which Blender's USD export leaves off).
 """
 import sys
 from pathlib import Path
@@ -23,6 +23,7 @@ import numpy as np
 
 AROUND, RINGS, LENGTH, RADIUS = 32, 20, 3.0, 0.3
 FRAMES = (1, 4, 8, 12, 16, 20, 24)
+MATERIAL = {"colour": (0.8, 0.3, 0.2), "roughness": 0.4, "metallic": 0.0}
 
 
 def build():
@@ -45,6 +46,14 @@ def build():
     mesh.update()
     body = bpy.data.objects.new("Cylinder", mesh)
     scene.collection.objects.link(body)
+    # a Principled BSDF material: both exporters write its base colour, roughness, metallic
+    skin = bpy.data.materials.new("Skin")
+    skin.use_nodes = True
+    bsdf = skin.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (*MATERIAL["colour"], 1.0)
+    bsdf.inputs["Roughness"].default_value = MATERIAL["roughness"]
+    bsdf.inputs["Metallic"].default_value = MATERIAL["metallic"]
+    mesh.materials.append(skin)
 
     arm_data = bpy.data.armatures.new("rig")
     rig = bpy.data.objects.new("rig", arm_data)
@@ -126,7 +135,8 @@ def main(out_dir):
     bpy.ops.wm.usd_export(filepath=str(out / "char.usdc"), export_animation=True)
     verts, tris = evaluated(scene, body)
     np.savez_compressed(out / "char_evaluated.npz", frames=np.array(FRAMES), fps=24.0, vertices=verts,
-                        triangles=tris)
+                        triangles=tris, colour=np.array(MATERIAL["colour"]),
+                        roughness=MATERIAL["roughness"], metallic=MATERIAL["metallic"])
     print(f"wrote {out}: char.glb, char.usdc, char_evaluated.npz ({len(verts[0])} vertices)")
 
 

@@ -79,3 +79,18 @@ def test_blender_export_has_the_depth_of_blenders_evaluated_mesh(tmp_path, mesh,
         first = _depths(_scene(tmp_path, "first", f"    mesh: {mesh}\n", y_up), "first")
         differ = [np.mean(np.isfinite(first[f]) != np.isfinite(want[f])) for f in first]
         assert max(differ) > 0.001                             # without it the middle never bulges
+
+
+@pytest.mark.parametrize("mesh", ["char.glb", "char.usdc"])
+def test_the_principled_material_comes_through_both_exports(tmp_path, mesh):
+    """Blender's Principled BSDF (base colour, roughness, metallic) as each
+    exporter writes it: glTF's pbrMetallicRoughness, USD's UsdPreviewSurface."""
+    from anim.scene import AnimatedScene
+    for f in HERE.iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    scene = AnimatedScene(_scene(tmp_path, "m", f"    mesh: {mesh}\n", mesh == "char.glb"))
+    rows = scene.material_table[scene.tri_material]
+    assert np.all(rows == rows[0])
+    np.testing.assert_allclose(rows[0, :3], REF["colour"], rtol=1e-6)
+    np.testing.assert_allclose(rows[0, 3], 0.04 + 0.96 * float(REF["metallic"]), rtol=1e-6)
+    np.testing.assert_allclose(rows[0, 4], 2 / float(REF["roughness"]) ** 4 - 2, rtol=1e-5)
