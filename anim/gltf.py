@@ -34,6 +34,13 @@ def _field(obj, name, default=None):
     return default if value is None else value
 
 
+def _spec_gloss(material):
+    """The KHR_materials_pbrSpecularGlossiness dict of a material, or None."""
+    ext = _field(material, "extensions", {}) or {}
+    found = ext.get("KHR_materials_pbrSpecularGlossiness") if isinstance(ext, dict) else None
+    return found if isinstance(found, dict) else None
+
+
 def _quat_matrix(q):
     """3x3 rotation of a unit quaternion (x, y, z, w), glTF order."""
     out = np.empty((3, 3))
@@ -270,8 +277,12 @@ class GltfObject:
         self.materials = {m: self._material(m) for m in used}
 
     def _texture_info(self, material_index):
-        """The base colour texture's info of a material, or None."""
+        """The base colour (or, in the older specular-glossiness model, the
+        diffuse) texture's info of a material, or None."""
         mat = self.doc.materials[material_index]
+        gloss = _spec_gloss(mat)
+        if gloss is not None:
+            return gloss.get("diffuseTexture")
         pbr = mat.pbrMetallicRoughness
         return None if pbr is None else pbr.baseColorTexture
 
@@ -311,6 +322,11 @@ class GltfObject:
         colour = list(_field(pbr, "baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3] if pbr else [1.0, 1.0, 1.0]
         metallic = float(_field(pbr, "metallicFactor", 1.0)) if pbr else 1.0
         roughness = float(_field(pbr, "roughnessFactor", 1.0)) if pbr else 1.0
+        gloss = _spec_gloss(mat)
+        if gloss is not None:      # KHR_materials_pbrSpecularGlossiness (older exporters)
+            colour = list(gloss.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))[:3]
+            roughness = 1.0 - float(gloss.get("glossinessFactor", 1.0))
+            metallic = (sum(gloss.get("specularFactor", [1.0, 1.0, 1.0])) / 3.0 - 0.04) / 0.96
         alpha2 = max(roughness, 1e-3) ** 4
         texture = None
         info = self._texture_info(index)

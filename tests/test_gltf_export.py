@@ -295,3 +295,18 @@ def test_compressed_geometry_is_refused_in_one_line(tmp_path):
     b.save(tmp_path / "draco.glb", [b.node(mesh=b.mesh(QUAD, QUAD_FACES))])
     res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, "draco.glb"))])
     assert res.exit_code == 2 and "KHR_draco_mesh_compression" in res.output and "objects.0.mesh" in res.output
+
+
+def test_the_older_specular_glossiness_materials(tmp_path):
+    b = GltfBuilder()
+    mat = b.material([1.0, 1.0, 1.0])
+    b.doc.materials[mat].pbrMetallicRoughness = None
+    b.doc.materials[mat].extensions = {"KHR_materials_pbrSpecularGlossiness": {
+        "diffuseFactor": [0.3, 0.5, 0.7, 1.0], "specularFactor": [0.04, 0.04, 0.04], "glossinessFactor": 0.6}}
+    prim = gl.Primitive(attributes=gl.Attributes(POSITION=b.accessor(QUAD)),
+                        indices=b.accessor(np.array(QUAD_FACES).reshape(-1, 1), 5125), material=mat)
+    b.doc.meshes.append(gl.Mesh(primitives=[prim]))
+    b.save(tmp_path / "sg.glb", [b.node(mesh=0)])
+    scene = AnimatedScene(_scene(tmp_path, "sg.glb"))
+    row = scene.material_table[scene.tri_material[0]]
+    np.testing.assert_allclose(row[:5], [0.3, 0.5, 0.7, 0.04, 2 / 0.4 ** 4 - 2], rtol=1e-5)
