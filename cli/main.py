@@ -336,7 +336,7 @@ def _int_list(text, name, allowed=None):
 @click.option("--res", type=click.IntRange(16, 8192), help="Image size N (NxN); default 1024, and 192 for the "
                                                            "image error study of --error.")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=12, show_default=True,
-              help="Frames per configuration (medians are reported; a warm-up frame comes first).")
+              help="Frames per configuration (medians are reported; two warm-up frames come first).")
 @click.option("--accel", default="grid", show_default=True, help="Acceleration structures of the camera rays, comma-separated: grid, kdtree, bvh.")
 @click.option("--shadow-accel", "shadow_accels", default="bvh", show_default=True,
               help="Acceleration structures of the shadow rays, comma-separated: grid, kdtree, bvh (a row for each).")
