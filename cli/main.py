@@ -435,7 +435,7 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
 @click.argument("structures", nargs=-1, required=True)
 @click.option("--scene", "scene_name", help="A built-in scene instead of ANIM.yaml (see `assets list`).")
 @click.option("--frames", "n_frames", type=click.IntRange(1, 10000), default=8, show_default=True,
-              help="Frames timed per structure (medians; a warm-up frame comes first).")
+              help="Frames timed per structure (medians; two warm-up frames come first).")
 @click.option("--res", type=click.IntRange(16, 8192),
               help="Image width; the height follows the scene's aspect. Default: the scene file's "
                    "output.resolution (built-in scenes: 1024x1024).")

@@ -57,7 +57,9 @@ def compare(path, names, n_frames, res, threads, label=None):
     for name in names:
         cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
         renderer = SceneRenderer(scene, cfg, shading_of(scene))
-        renderer.render(scene.time_of(frames[0]))                 # compile / warm up
+        # compile / warm up: two frames, the second for the per-frame paths (refit, moved grid)
+        for frame in (scene.frame_numbers[0], scene.frame_numbers[min(1, len(scene.frame_numbers) - 1)]):
+            renderer.render(scene.time_of(frame))
         timings = []
         for i, frame in enumerate(frames):
             interp_ms, result = renderer.render(scene.time_of(frame))
