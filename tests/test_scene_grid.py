@@ -89,7 +89,8 @@ def test_frame_renders_the_same_alone_or_in_sequence(tmp_path):
     assert np.array_equal(last.rgba, alone.rgba) and np.array_equal(last.z, alone.z)
 
 
-def test_static_scene_builds_its_kd_tree_once(tmp_path):
+def test_static_scene_builds_its_kd_tree_once(tmp_path, monkeypatch):
+    import raycore.frame
     from anim.scene import AnimatedScene
     from anim.render.renderer import SceneRenderer
     from anim.render.settings import config_of, shading_of
@@ -101,8 +102,12 @@ def test_static_scene_builds_its_kd_tree_once(tmp_path):
 """, camera_yaml="camera: {keys: [{t: 0, eye: [0, 1, 6], look_at: [0, 0.5, 0]}, {t: 2, eye: [3, 2, 5], look_at: [0, 0.5, 0]}]}")
     scene = AnimatedScene(path)
     renderer = SceneRenderer(scene, config_of(scene, width=32, height=32, accel="kdtree"), shading_of(scene))
-    _, first = renderer.render(0.0)
+    builds = []
+    build = raycore.frame.build_kdtree
+    monkeypatch.setattr(raycore.frame, "build_kdtree", lambda *a: builds.append(1) or build(*a))
+    renderer.render(0.0)
     tree = renderer.scene_grid.kd_tree
-    _, second = renderer.render(1.0)
-    assert tree is not None and renderer.scene_grid.kd_tree is tree
-    assert second.timings["build_ms"] < first.timings["build_ms"]
+    renderer.render(1.0)
+    renderer.render(2.0)
+    # counted, not timed: a later frame's build phase may load another kernel (the BVH refit)
+    assert tree is not None and renderer.scene_grid.kd_tree is tree and len(builds) == 1
