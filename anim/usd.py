@@ -510,6 +510,9 @@ def scene_of_stage(path, camera=None):
     time0 = pxr.Usd.TimeCode(start / fps * tcps)
     cam_prim = _camera_prim(stage, camera, pxr, path)
     width = 512
+    if cam_prim is not None and pxr.UsdGeom.Camera(cam_prim).GetProjectionAttr().Get() == "orthographic":
+        raise SceneError(path, "--camera" if camera else "", f"camera {cam_prim.GetPath()} is orthographic; "
+                                                             "frustrace renders perspective cameras only")
     if cam_prim is not None:
         keys = []
         for f in range(start, end + 1):

@@ -266,3 +266,11 @@ def test_a_usdz_package_renders_with_the_texture_inside_it(tmp_path):
     np.testing.assert_allclose(shading.tex_data[:6], [1, 0, 0, 0, 1, 0], atol=1e-6)
     from anim.render.cluster import referenced_files
     assert {ref for _, ref in referenced_files(scene)} == {"s.yaml", "pkg.usdz"}
+
+
+def test_an_orthographic_camera_is_refused_in_one_line(tmp_path):
+    stage = shot(tmp_path / "shot.usda")
+    UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam")).CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+    stage.GetRootLayer().Save()
+    out = _check_line(tmp_path / "shot.usda")
+    assert "/World/Cam" in out and "orthographic" in out
