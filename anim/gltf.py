@@ -17,6 +17,7 @@ import pygltflib
 
 from .errors import SceneError
 from .interpolate import wrap_time
+from .materials import pbr_material
 from .track_kernels import quat_to_matrix, slerp_into
 from .vertex_kernels import skin_into, transform_into
 
@@ -311,12 +312,9 @@ class GltfObject:
         return uv.astype(np.float32)
 
     def _material(self, index):
-        """A frustrace material (anim/scene.py's keys) from the file's material:
-        base colour factor and texture as the diffuse term (the texture
-        sRGB-decoded, as glTF stores it); roughness r to the Blinn-Phong
-        exponent of the same Beckmann width, 2 / r^4 - 2 (Walter et al. 2007),
-        clamped to [1, 10^4]; specular weight 0.04 (a dielectric's
-        reflectance) up to 1 with the metallic factor."""
+        """A frustrace material from the file's material (anim/materials.py): base
+        colour factor and texture as the diffuse term (the texture
+        sRGB-decoded, as glTF stores it), roughness and metallic factors."""
         mat = self.doc.materials[index]
         pbr = mat.pbrMetallicRoughness
         colour = list(_field(pbr, "baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3] if pbr else [1.0, 1.0, 1.0]
@@ -327,16 +325,11 @@ class GltfObject:
             colour = list(gloss.get("diffuseFactor", [1.0, 1.0, 1.0, 1.0]))[:3]
             roughness = 1.0 - float(gloss.get("glossinessFactor", 1.0))
             metallic = (sum(gloss.get("specularFactor", [1.0, 1.0, 1.0])) / 3.0 - 0.04) / 0.96
-        alpha2 = max(roughness, 1e-3) ** 4
         texture = None
         info = self._texture_info(index)
         if info is not None and _field(info, "index") is not None:
             texture = self._image(_field(info, "index"))
-        return {"name": mat.name or f"material {index}",
-                "diffuse": tuple(float(min(max(c, 0.0), 1e6)) for c in colour),
-                "specular": 0.04 + 0.96 * min(max(metallic, 0.0), 1.0),
-                "shininess": float(min(max(2.0 / alpha2 - 2.0, 1.0), 1e4)),
-                "texture": texture, "texture_space": "srgb"}
+        return pbr_material(mat.name or f"material {index}", colour, roughness, metallic, texture)
 
     def _image(self, texture_index):
         """The image of a texture: a path, or (bytes, suffix) for one stored

@@ -16,6 +16,7 @@ from pydantic import ValidationError
 from .area_lights import emitter_positions
 from .errors import SceneError
 from .interpolate import Curve
+from .materials import DEFAULT_MATERIAL
 from .mesh_io import load_mesh, vertex_lines
 from .rig import Skeleton
 from .rigid_batch import RigidBatch
@@ -23,9 +24,6 @@ from .schema import SceneFile, parse_scene
 from .usd import UsdObject, is_usd, scene_of_stage
 from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from .vertex_kernels import skin_into, transform_into
-
-DEFAULT_MATERIAL = {"diffuse": (0.8, 0.8, 0.8), "specular": 0.0, "shininess": 32.0, "texture": None,
-                    "texture_space": "auto"}
 
 
 def _key_path(loc):
@@ -208,16 +206,12 @@ class AnimatedScene:
         self.texture_spaces = []       # "auto" | "srgb" | "linear", one per texture
         self.texture_keys = []         # "materials.NAME.texture", for errors
         for name, m in zip(self.material_names + ["(default)"], self.materials):
+            source = None
             if m["texture"]:
-                tex_path = self.path.parent / m["texture"]
-                if not tex_path.is_file():
-                    raise SceneError(self.path, f"materials.{name}.texture", f"file not found: {tex_path}")
-                self.texture_keys.append(f"materials.{name}.texture")
-                m["texture_index"] = len(self.texture_paths)
-                self.texture_paths.append(tex_path)
-                self.texture_spaces.append(m["texture_space"])
-            else:
-                m["texture_index"] = -1
+                source = self.path.parent / m["texture"]
+                if not source.is_file():
+                    raise SceneError(self.path, f"materials.{name}.texture", f"file not found: {source}")
+            self._add_texture(m, source, f"materials.{name}.texture")
         default_material = len(self.material_names)
         self.warnings = []         # e.g. quaternions normalised; the CLI prints them
         self.objects = []
@@ -297,26 +291,29 @@ class AnimatedScene:
             self.warnings.append("no lights: surfaces get the ambient term only")
         self._warn_outside_keys()
 
-    def _file_materials(self, gltf, index, default_material):
+    def _add_texture(self, material, source, key):
+        """Register a material's texture (a path, or (bytes, suffix) from inside
+        a file) and set its texture_index; -1 without one (source None)."""
+        material["texture_index"] = -1 if source is None else len(self.texture_paths)
+        if source is not None:
+            self.texture_paths.append(source)
+            self.texture_spaces.append(material["texture_space"])
+            self.texture_keys.append(key)
+
+    def _file_materials(self, source, index, default_material):
         """Material rows for a glTF or USD object's own materials (appended to
         self.materials, textures registered); (n_t,) i32 row per triangle,
         the default material where a primitive has none."""
         rows = {}
-        for m, mat in gltf.materials.items():
+        for m, mat in source.materials.items():
             mat = dict(mat)
-            if mat["texture"] is not None:
-                self.texture_keys.append(f"objects.{index}.mesh")
-                mat["texture_index"] = len(self.texture_paths)
-                self.texture_paths.append(mat["texture"])
-                self.texture_spaces.append(mat["texture_space"])
-            else:
-                mat["texture_index"] = -1
+            self._add_texture(mat, mat["texture"], f"objects.{index}.mesh")
             rows[m] = len(self.materials)
             self.materials.append(mat)
         lookup = np.full(max(rows) + 2, default_material, np.int32)
         for m, row in rows.items():
             lookup[m] = row
-        return lookup[gltf.face_material]       # -1 (no material) -> the last entry: the default
+        return lookup[source.face_material]       # -1 (no material) -> the last entry: the default
 
     def _paths_outside(self):
         """(key, path) of every file reference that resolves outside the
