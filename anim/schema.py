@@ -19,6 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from raycore.config import PACKET_SIZES
 
+from .usd import USD_SUFFIXES
+
 # coordinates and colours stay inside float32 with room for arithmetic (anim/tracks.py)
 Coord = Annotated[float, Field(ge=-1e37, le=1e37)]
 Vec3 = Tuple[Coord, Coord, Coord]
@@ -245,7 +247,7 @@ class Object(Strict):
             raise ValueError("'animation' selects an animation of a .gltf/.glb mesh")
         if is_gltf and self.skeleton is not None:
             raise ValueError("a glTF file brings its own skins; 'skeleton' is for other meshes")
-        is_usd = self.mesh is not None and self.mesh.lower().endswith((".usd", ".usda", ".usdc", ".usdz"))
+        is_usd = self.mesh is not None and self.mesh.lower().endswith(USD_SUFFIXES)
         if self.prim is not None and not is_usd:
             raise ValueError("'prim' selects a prim of a USD stage (.usd, .usda, .usdc, .usdz)")
         if is_usd and self.skeleton is not None:

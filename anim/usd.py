@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError
+from .materials import DEFAULT_MATERIAL, pbr_material
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 _STAGES = {}          # resolved path -> (mtime, Stage, UsdSkel.Cache): one open per file
@@ -87,7 +88,7 @@ def _triangulate(counts, indices, path, scene_path, key):
 class _Mesh:
     """One UsdGeomMesh: topology, and how to evaluate its points at a time code."""
 
-    def __init__(self, prim, skinning, scene_path, key, need_uvs):
+    def __init__(self, prim, skinning, scene_path, key):
         pxr = _pxr(scene_path, key)
         UsdGeom = pxr.UsdGeom
         self.prim, self.path = prim, str(prim.GetPath())
@@ -112,27 +113,25 @@ class _Mesh:
         # texture coordinates only where a bound material has a texture
         self.point_of = None                 # vertex -> point, where face-varying UVs split points
         self.uvs = None
-        if need_uvs and any(m is not None and m["texture"] is not None for m in self.materials[1]):
+        if any(m["texture"] is not None for m in self.materials[1]):
             self.uvs, faces = self._uvs(prim, faces, corner, scene_path, key)
         self.faces = np.ascontiguousarray(faces, np.int32)
         varying = self.points_attr.ValueMightBeTimeVarying()
-        moving_xform = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
-                           for p in _ancestors(prim) if p.IsA(UsdGeom.Xformable))
+        placed_by = prim                     # the prim whose transform places the points
         if skinning is not None:
-            skel_query = skinning[0]
-            anim = skel_query.GetAnimQuery()
-            skel_prim = skel_query.GetSkeleton().GetPrim()
-            moving_xform = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
-                               for p in _ancestors(skel_prim) if p.IsA(UsdGeom.Xformable))
+            anim = skinning[0].GetAnimQuery()
+            placed_by = skinning[0].GetSkeleton().GetPrim()
             varying |= bool(anim) and (anim.JointTransformsMightBeTimeVarying()
                                        or anim.BlendShapeWeightsMightBeTimeVarying())
+        moving_xform = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
+                           for p in _ancestors(placed_by) if p.IsA(UsdGeom.Xformable))
         self.static = not (varying or moving_xform)
         self.rigid = not varying and skinning is None
 
     def _uvs(self, prim, faces, corner, scene_path, key):
         pxr = _pxr(scene_path, key)
         api = pxr.UsdGeom.PrimvarsAPI(prim)
-        names = [m["uv_set"] for m in self.materials[1] if m is not None and m["texture"] is not None]
+        names = [m["uv_set"] for m in self.materials[1] if m["texture"] is not None]
         primvar = None
         for name in dict.fromkeys(names + ["st", "UVMap", "uv"]):
             if api.HasPrimvar(name):
@@ -236,8 +235,7 @@ def _bound_materials(prim, n_faces, poly, scene_path, key):
         colour = pxr.UsdGeom.Gprim(prim).GetDisplayColorPrimvar().ComputeFlattened()
         if colour is not None and len(colour) == 1:
             rgb = tuple(float(min(max(c, 0.0), 1e6)) for c in colour[0])
-            found.append({"name": f"displayColor {rgb}", "diffuse": rgb, "specular": 0.0, "shininess": 32.0,
-                          "texture": None, "texture_space": "auto", "uv_set": "st"})
+            found.append({**DEFAULT_MATERIAL, "name": f"displayColor {rgb}", "diffuse": rgb, "uv_set": "st"})
             per_face[per_face < 0] = len(found) - 1
     return per_face[poly], found
 
@@ -256,7 +254,7 @@ def _input_value(shader, name):
 def material_of(material, scene_path, key):
     """A frustrace material from a UsdPreviewSurface: diffuseColor (value or
     UsdUVTexture, sRGB unless the texture says raw), roughness and metallic
-    mapped as for glTF (anim/gltf.py). None for other shaders."""
+    mapped as for glTF (anim/materials.py). None for other shaders."""
     pxr = _pxr(scene_path, key)
     shader = material.ComputeSurfaceSource()[0] if material else None
     if not shader or shader.GetIdAttr().Get() != "UsdPreviewSurface":
@@ -282,13 +280,8 @@ def material_of(material, scene_path, key):
     colour = tuple(colour) if colour is not None else (0.18, 0.18, 0.18)     # UsdPreviewSurface's default
     roughness, _ = _input_value(shader, "roughness")
     metallic, _ = _input_value(shader, "metallic")
-    roughness = 0.5 if roughness is None else float(roughness)
-    metallic = 0.0 if metallic is None else float(metallic)
-    return {"name": str(material.GetPrim().GetPath()),
-            "diffuse": tuple(float(min(max(c, 0.0), 1e6)) for c in colour[:3]),
-            "specular": 0.04 + 0.96 * min(max(metallic, 0.0), 1.0),
-            "shininess": float(min(max(2.0 / max(roughness, 1e-3) ** 4 - 2.0, 1.0), 1e4)),
-            "texture": texture, "texture_space": space, "uv_set": uv_set or "st"}
+    return pbr_material(str(material.GetPrim().GetPath()), colour, 0.5 if roughness is None else roughness,
+                        0.0 if metallic is None else metallic, texture, space, uv_set or "st")
 
 
 def _texture_source(resolved, pxr):
@@ -355,7 +348,7 @@ class UsdObject:
     """The meshes under one prim of a stage, as one frustrace object;
     `place(t, out, transform)` writes the posed vertices (n, 3) f32."""
 
-    def __init__(self, path, prim_path, scene_path, key, need_uvs=True):
+    def __init__(self, path, prim_path, scene_path, key):
         self.path, self.scene_path, self.key = Path(path), scene_path, key
         pxr = self.pxr = _pxr(scene_path, key)
         self.stage, cache = open_stage(path, scene_path, key)
@@ -371,7 +364,7 @@ class UsdObject:
             raise SceneError(scene_path, key, f"{self.path.name}: no mesh under {where}")
         skinned = _skinning_targets(self.stage, cache, pxr)
         self.tcps = self.stage.GetTimeCodesPerSecond() or 24.0
-        self.meshes = [_Mesh(p, skinned.get(str(p.GetPath())), scene_path, key, need_uvs) for p in prims]
+        self.meshes = [_Mesh(p, skinned.get(str(p.GetPath())), scene_path, key) for p in prims]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
         self.subdivided = [m.path for m in self.meshes
                            if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
@@ -534,12 +527,10 @@ def scene_of_stage(path, camera=None):
         notes.append(f"{len(lights)} light(s) from UsdLux")
     else:
         # as USD viewers do (usdview's camera light): a light at the eye, of
-        # the intensity that lights the point looked at with irradiance 1
+        # the intensity that lights the centre of the bounds with irradiance 1
         eye = np.array(cam["eye"] if "eye" in cam else cam["keys"][0]["eye"])
-        look = np.array(cam["look_at"] if "look_at" in cam else cam["keys"][0]["look_at"])
-        if cam_prim is not None:
-            look = _bounds_centre(stage, time0, pxr)
-        d2 = float(np.sum((look - eye) ** 2)) or 1.0
+        lo, hi = _bounds(stage, time0, pxr)
+        d2 = float(np.sum(((lo + hi) / 2 - eye) ** 2)) or 1.0
         lights = [{"type": "point", "position": _vec(eye), "intensity": d2}]
         notes.append("no lights in the stage: a point light at the camera, as USD viewers do")
     data = {"version": 1, "frames": {"start": start, "end": end, "fps": float(fps)},
@@ -555,11 +546,6 @@ def _bounds(stage, time, pxr):
     if box.IsEmpty() or not np.all(np.isfinite(lo)):
         lo, hi = -np.ones(3), np.ones(3)
     return lo, hi
-
-
-def _bounds_centre(stage, time, pxr):
-    lo, hi = _bounds(stage, time, pxr)
-    return (lo + hi) / 2
 
 
 def _default_camera(stage, time, pxr):
