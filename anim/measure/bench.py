@@ -36,6 +36,15 @@ def scene_file(name: str, workdir: Path) -> Path:
     return builtin.get(name).write(workdir / name)
 
 
+def warm_up_frames(scene) -> list:
+    """The two frames rendered before timing: the second takes the per-frame
+    paths the first does not (the BVH's refit, a moved grid), whose first
+    call loads or compiles them (a refit's 7 ms cache load made a 2-frame
+    median refit 3 ms, not 0.04)."""
+    numbers = scene.frame_numbers
+    return [numbers[0], numbers[min(1, len(numbers) - 1)]]
+
+
 def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, threads: int,
                 accel: str = "grid", workdir: Path = None, depth_out: list = None,
                 shadow_accel: str = SHADOW_ACCEL) -> dict:
@@ -49,11 +58,7 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
     renderer = SceneRenderer(scene, cfg, shading_of(scene))
     frames = scene.frame_numbers[:max(1, n_frames)]
     rows = []
-    # two warm-up frames: the second takes the per-frame paths the first does
-    # not (the BVH's refit, a moved grid), whose first call loads or compiles
-    # them (a refit's 7 ms cache load made a 2-frame median refit 3 ms, not 0.04)
-    warm = [scene.frame_numbers[0], scene.frame_numbers[min(1, len(scene.frame_numbers) - 1)]]
-    for i, frame in enumerate([*warm, *frames], start=-1):
+    for i, frame in enumerate([*warm_up_frames(scene), *frames], start=-1):
         interp_ms, result = renderer.render(scene.time_of(frame))
         t0 = time.perf_counter()
         if workdir is not None:          # the frame's EXR, as `render` writes it

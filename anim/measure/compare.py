@@ -9,6 +9,8 @@ from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
 from raycore.accelerators import packet_of
 
+from .bench import warm_up_frames
+
 # each structure traces every ray of its frames, shadow rays included
 STRUCTURES = {
     "grid": {"accel": "grid", "shadow_accel": "grid"},
@@ -57,8 +59,7 @@ def compare(path, names, n_frames, res, threads, label=None):
     for name in names:
         cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
         renderer = SceneRenderer(scene, cfg, shading_of(scene))
-        # compile / warm up: two frames, the second for the per-frame paths (refit, moved grid)
-        for frame in (scene.frame_numbers[0], scene.frame_numbers[min(1, len(scene.frame_numbers) - 1)]):
+        for frame in warm_up_frames(scene):                           # compile / warm up
             renderer.render(scene.time_of(frame))
         timings = []
         for i, frame in enumerate(frames):
