@@ -77,7 +77,8 @@ def fitted_table(title, columns, rows, width) -> Table:
 
 def summary_table(stats):
     s = stats["summary"]
-    compiled = (stats["runs"][-1].get("compiled") if stats.get("runs") else None) or {}
+    run = stats["runs"][-1] if stats.get("runs") else {}
+    compiled = {**(run.get("compiled_by_helper") or {}), **(run.get("compiled") or {})}
     med = s["median_ms"]
     table = Table(title=f"{stats['scene']}  {stats['resolution'][0]}x{stats['resolution'][1]}  "
                         f"packet {stats['packet']}  threads {stats['threads']}  "
@@ -89,7 +90,8 @@ def summary_table(stats):
     console.print(table)
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
                   f"fps_wall {s['fps_wall']:.1f}   compile {s['compile_s']:.2f} s (not in fps; "
-                  + (f"{len(compiled)} kernels compiled, cached for later runs)" if compiled else "from the cache)"))
+                  + (f"{len(compiled)} kernels compiled"
+                     + (" in two processes" if run.get("compiled_by_helper") else "") + ", cached for later runs)" if compiled else "from the cache)"))
 
 
 def bench_table(rows, console=None):

@@ -117,7 +117,8 @@ def _light_is_dark(light) -> bool:
 
 
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
-                 buffers: FrameBuffers = None, scene_grid: SceneGrid = None) -> FrameResult:
+                 buffers: FrameBuffers = None, scene_grid: SceneGrid = None,
+                 camera_accel=None) -> FrameResult:
     """Render one frame. Pass the same `buffers` and `scene_grid` for
     consecutive frames to reuse work arrays, image memory and static geometry;
     the returned images then belong to the buffers' ring (see FrameBuffers),
@@ -126,7 +127,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     Per pass of camera rays (one per sample offset): trace, gather the visible
     surface once (surface.py), trace each light's shadow rays in light-space
     packets (shadow_rays.py) through cfg.shadow_accel, shade the samples,
-    scatter them into the image."""
+    scatter them into the image.
+
+    camera_accel: an object with trace_camera and trace_rays used for the
+    camera rays instead of building cfg.accel (the compile helper's stand-in,
+    anim/render/compile_helper.py)."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
     if buffers is None or buffers.size != (W, H, n_lights, cfg.packet):
@@ -144,9 +149,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     # their common surface (accelerators.py)
     t0 = time.perf_counter()
     shadow_name = cfg.shadow_accel or SHADOW_ACCEL
-    tri_verts, built = build_structures({cfg.accel, shadow_name} if cast_shadows else {cfg.accel},
-                                        geom, cfg, scene_grid, buffers, counters)
-    accel = built[cfg.accel]
+    names = ({shadow_name} if cast_shadows else set()) | ({cfg.accel} if camera_accel is None else set())
+    tri_verts, built = build_structures(names, geom, cfg, scene_grid, buffers, counters)
+    accel = built[cfg.accel] if camera_accel is None else camera_accel
     shadow_accel = built.get(shadow_name)
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
 

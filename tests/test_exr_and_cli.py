@@ -221,7 +221,7 @@ def test_fps_wall_leaves_the_compile_time_out(small_demo, tmp_path, monkeypatch)
 
     def slow_warm_up(*args):
         time_module.sleep(1.5)
-        return 1.5
+        return 1.5, {}
     monkeypatch.setattr(job_module, "warm_up", slow_warm_up)
     res = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(tmp_path / "o"), "--frames", "0:1", "-q"])
     assert res.exit_code == 0, res.output

@@ -3,7 +3,9 @@ installed into a fresh virtual environment outside the source tree, renders
 the demo from there with nothing of the source tree on its path. The new
 environment takes its dependencies from the test's own environment (a .pth
 line to its site-packages, whose own .pth files, the editable install's
-among them, are not processed), so the test needs no network."""
+among them, are not processed), so the test needs no network. Its cache
+is cold, so it also checks the two-process cold compile."""
+import json
 import os
 import site
 import subprocess
@@ -42,7 +44,15 @@ def test_the_wheel_installs_and_renders_the_demo_outside_the_tree(tmp_path):
                                        timeout=900)
     made = run("assets", "make", "demo", "-o", "demo")
     assert made.returncode == 0, made.stderr
-    # without shadows: the wheel is the subject, not the shadow kernels (their compile would add ~45 s)
-    out = run("render", "demo/anim.yaml", "-o", "frames", "--frames", "0:1", "--res", "32x24", "-q", "--no-shadows")
+    out = run("render", "demo/anim.yaml", "-o", "frames", "--frames", "0:1", "--res", "32x24", "-q")
     assert out.returncode == 0, out.stderr
     assert sorted(p.name for p in (work / "frames").glob("*.exr")) == ["frame_0000.exr", "frame_0001.exr"]
+    # the installed copy's cache was cold: a helper process compiled the
+    # surface half (anim/render/compile_helper.py) with the very
+    # specialisations the frames use, so this process compiled none of them
+    run_stats = json.loads((work / "frames" / "stats.json").read_text())["runs"][-1]
+    here, helper = set(run_stats["compiled"]), set(run_stats.get("compiled_by_helper", {}))
+    surface_half = {"raycore.surface.fill_surface", "raycore.shade.shade_samples",
+                    "raycore.shadow_rays.light_space_order", "raycore.bvh_trace.trace_batch"}
+    assert "raycore.grid_drivers.trace_primary" in here
+    assert surface_half <= helper and not surface_half & here, (here, helper)

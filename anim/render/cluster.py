@@ -142,7 +142,7 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
     scene = AnimatedScene(root / bundle.scene_name, bundle.camera)
     cfg = RenderConfig(**cfg_fields)
     shading = shading_of(scene)
-    compile_s = warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]))
+    compile_s, _ = warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]))
     _WORKER_SCENES[key] = WorkerScene(scene, SceneRenderer(scene, cfg, shading), compile_s, directory)
     return _WORKER_SCENES[key]
 

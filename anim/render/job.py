@@ -147,8 +147,10 @@ def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, 
     if todo.first() is None:
         return
     with watching(on_compile) as watch:
-        extra["compile_s"] = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
+        extra["compile_s"], helper_compiled = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
     extra["compiled"] = watch.seconds()          # {kernel: s}: empty when the cache had them all
+    if helper_compiled:                          # a cold cache's other half (compile_helper.py)
+        extra["compiled_by_helper"] = helper_compiled
     if on_compile is not None and watch.done:
         on_compile(None)
     renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)

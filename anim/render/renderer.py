@@ -7,7 +7,8 @@ import time
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
+from raycore.camera import camera_basis
+from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_structures, render_frame
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
 
@@ -37,27 +38,55 @@ class SceneRenderer:
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
         return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid)
 
+    def trace_camera_only(self, t):
+        """Interpolate, build the camera rays' structure and trace them, and
+        nothing more: what warm_up compiles here while a helper compiles the rest."""
+        vertices = self.scene.vertices_at(t)
+        geom = Geometry(vertices, self.scene.faces, self.scene.tri_material, self.scene.uvs, *self.vf)
+        _, built = build_structures({self.cfg.accel}, geom, self.cfg, self.scene_grid, self.buffers, {})
+        pose = CameraPose(*self.scene.camera_at(t))
+        cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, self.cfg.width, self.cfg.height)
+        built[self.cfg.accel].trace_camera(cam, self.cfg.width, self.cfg.height, (0.5, 0.5))
 
-def warm_up(scene, shading, cfg, t) -> float:
+
+def warm_up(scene, shading, cfg, t):
     """Compile (or load from numba's cache) every kernel the frame loop will
     use, on a tiny image with the run's settings: two frames (the second
     takes the per-frame paths the first does not: the BVH's refit, a moved
-    grid) and an EXR write (the half-float conversion). Seconds; reported
-    as compile time. Warming only one 1-spp frame left the write, the
-    refit and the error budget to compile inside frames 0 and 1 (write_ms
-    731, shade_ms 945 on a cold run; issue 20)."""
+    grid) and an EXR write (the half-float conversion). Returns (seconds,
+    {kernel: s} compiled by a helper process); the seconds are reported as
+    compile time. Warming only one 1-spp frame left the write, the refit and
+    the error budget to compile inside frames 0 and 1 (write_ms 731,
+    shade_ms 945 on a cold run; issue 20).
+
+    On a cold cache a helper process compiles the surface half meanwhile
+    (compile_helper.py): this process first compiles the camera half, waits
+    for the helper, and then loads its kernels from the cache."""
     import tempfile
 
     from raycore.image_io import write_exr
+
+    from . import compile_helper
     t0 = time.perf_counter()
+    dt = 1.0 / scene.spec.frames.fps
     small = cfg.__class__(**{**cfg.__dict__, "width": 2 * cfg.packet, "height": 2 * cfg.packet})
+    helper = compile_helper.start(scene, small, t)
     renderer = SceneRenderer(scene, small, shading)
+    helper_compiled = {}
+    if helper is not None:
+        done = False
+        try:
+            renderer.trace_camera_only(t)
+            renderer.trace_camera_only(t + dt)
+            done = True
+        finally:
+            helper_compiled = helper.finish(wait=done)
     renderer.render(t)
-    _, result = renderer.render(t + 1.0 / scene.spec.frames.fps)
+    _, result = renderer.render(t + dt)
     with tempfile.TemporaryDirectory() as tmp:
         write_exr(f"{tmp}/warm.exr", {"RGBA": result.rgba, "Z": result.z, **result.aovs}, {},
                   scene.spec.output.compression)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, helper_compiled
 
 
 # bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),

@@ -1,0 +1,144 @@
+"""A cold numba cache filled by two processes at once (issue 21).
+
+On a first run every kernel is compiled, one after another, on one core,
+while the other cores idle. The kernels split into two halves that need
+nothing of each other's results to be compiled: the camera half
+(interpolation, the camera rays' structure and traversal) and the surface
+half (the visible-surface gather, the shadow structure and its rays,
+shading, the EXR write). So the main process compiles the camera half
+while a helper process compiles the surface half, on camera hits made up
+with the right types (`MadeUpHits`: no camera structure is built there);
+each writes its kernels to numba's on-disk cache, and the main process's
+full warm-up then loads the helper's kernels instead of compiling them.
+
+Nothing changes the pictures: the helper only fills the cache, and its
+output is discarded. The helper is started only when the cache lacks the
+surface half (a warm run costs nothing), on a machine with more than one
+core, and unless FRUSTRACE_COMPILE_HELPER=0.
+"""
+import os
+import pickle
+import signal
+import subprocess
+import sys
+
+import numpy as np
+
+from raycore.counters import Counters
+from raycore.trace import Hits, row_major_offsets
+
+# the surface half's kernels that tell whether the cache is cold
+_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.shadow_rays:light_space_order")
+
+
+def _cached(probe) -> bool:
+    """Whether numba's on-disk cache holds a current entry of the kernel."""
+    module, name = probe.split(":")
+    try:
+        dispatcher = getattr(__import__(module, fromlist=[name]), name)
+        return bool(dispatcher._cache._cache_file._load_index())
+    except Exception:        # numba's cache internals moved: take the cache as warm (no helper)
+        return True
+
+
+def wanted() -> bool:
+    """Start a helper: the cache is cold, there is a second core, and it is not switched off."""
+    if os.environ.get("FRUSTRACE_COMPILE_HELPER", "1") == "0":
+        return False
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return cores > 1 and not all(_cached(p) for p in _PROBES)
+
+
+class Helper:
+    """The helper process compiling the surface half; finish() waits for it."""
+
+    def __init__(self, scene, cfg, t):
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
+               "NUMBA_NUM_THREADS": "1"}
+        self.proc = subprocess.Popen([sys.executable, "-m", "anim.render.compile_helper"], env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self.proc.stdin.write(pickle.dumps((str(scene.path), scene.camera_choice, cfg, t)))
+        self.proc.stdin.close()
+        self.proc.stdin = None        # communicate() must not flush it again
+
+    def finish(self, wait=True) -> dict:
+        """{kernel: s} the helper compiled ({} if it failed: the main process
+        then compiles what is missing). wait=False ends it at once."""
+        if not wait:
+            self.proc.kill()
+        out, _ = self.proc.communicate()
+        if self.proc.returncode != 0:
+            return {}
+        try:
+            return pickle.loads(out)
+        except Exception:
+            return {}
+
+
+def start(scene, cfg, t):
+    """A Helper compiling the surface half of (scene, cfg) at time t, or None when not wanted."""
+    return Helper(scene, cfg, t) if wanted() else None
+
+
+class MadeUpHits:
+    """Camera rays' stand-in in the helper: every ray hits a triangle (ray i
+    triangle i mod n) at t = 1, barycentrics (1/3, 1/3), with the types and
+    layout the real structures return. Nothing is traced."""
+    name = "made-up"
+
+    def __init__(self, n_triangles):
+        self.n = n_triangles
+
+    def _hits(self, n):
+        prim = (np.arange(n, dtype=np.int32) % self.n) if self.n else np.full(n, -1, np.int32)
+        third = np.full(n, 1 / 3, np.float32)
+        return Hits(np.ones(n, np.float32), prim, third, third.copy(), Counters(0, 0, 0, 0, 0))
+
+    def trace_camera(self, cam, width, height, jitter):
+        return self._hits(width * height), row_major_offsets(width, height)
+
+    def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False):
+        return self._hits(dirs.shape[0])
+
+
+def compile_surface_half(scene_path, camera, cfg, t) -> dict:
+    """Run two frames and an EXR write of the scene with made-up camera hits
+    (made-up vertices too: interpolation is the camera half's). {kernel: s}."""
+    import tempfile
+
+    from anim.render.compile_watch import watching
+    from anim.render.settings import shading_of
+    from anim.scene import AnimatedScene
+    from raycore.frame import CameraPose, FrameBuffers, Geometry, render_frame
+    from raycore.image_io import write_exr
+    from raycore.mesh import vertex_face_csr
+    from raycore.scene_grid import SceneGrid
+
+    scene = AnimatedScene(scene_path, camera)
+    shading = shading_of(scene)
+    vertices = np.random.default_rng(0).random((scene.n_vertices, 3), dtype=np.float32)
+    vf = vertex_face_csr(scene.faces, scene.n_vertices)
+    with watching() as watch:
+        scene_grid = SceneGrid(scene.faces, scene.n_vertices, *vf, cfg.grid_density,
+                               scene.moving_triangles, scene.moving_object_ranges)
+        buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
+        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *vf)
+        camera_hits = MadeUpHits(scene.faces.shape[0])
+        pose = CameraPose(*scene.camera_at(t))
+        for _ in range(2):        # the second frame takes the refit paths
+            result = render_frame(geom, shading, pose, cfg, buffers, scene_grid, camera_accel=camera_hits)
+        with tempfile.TemporaryDirectory() as tmp:
+            write_exr(f"{tmp}/warm.exr", {"RGBA": result.rgba, "Z": result.z, **result.aovs}, {},
+                      scene.spec.output.compression)
+    return watch.seconds()
+
+
+def _main():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the main process ends it
+    scene_path, camera, cfg, t = pickle.loads(sys.stdin.buffer.read())
+    sys.stdout.buffer.write(pickle.dumps(compile_surface_half(scene_path, camera, cfg, t)))
+
+
+if __name__ == "__main__":
+    _main()
