@@ -35,3 +35,21 @@ def icosphere_mesh(level=2, radius=1.0):
 
 def tri_verts_of(vertices, faces):
     return np.ascontiguousarray(vertices[faces].reshape(-1, 9), np.float32)
+
+
+def pytest_sessionstart(session):
+    """On a cold numba cache, compile the demo's kernels once before the
+    xdist workers start: else every worker compiles the same kernels at the
+    same time. The render uses the two-process cold compile
+    (anim/render/compile_helper.py)."""
+    if hasattr(session.config, "workerinput"):        # an xdist worker: the controller did it
+        return
+    from anim.render import compile_helper
+    if not compile_helper.wanted():
+        return
+    import subprocess
+    import tempfile
+    with tempfile.TemporaryDirectory() as out:
+        subprocess.run([sys.executable, "-m", "cli.main", "render", str(ROOT / "anim/builtin/demo/anim.yaml"),
+                        "-o", out, "--frames", "0:1", "--res", "64x64", "-q"], cwd=ROOT, check=False,
+                       capture_output=True)
