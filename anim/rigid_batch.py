@@ -21,7 +21,9 @@ def _compose(quat, scale, trans, use_matrix, rot_matrix, out):
     r = np.empty((3, 3))
     for o in range(out.shape[0]):
         if use_matrix[o]:
-            r[:, :] = rot_matrix[o]
+            for i in range(3):    # element by element: see track_kernels.eval_vectors
+                for j in range(3):
+                    r[i, j] = rot_matrix[o, i, j]
         else:
             quat_to_matrix(quat[o, 0], quat[o, 1], quat[o, 2], quat[o, 3], r)
         for i in range(3):

@@ -55,7 +55,8 @@ def eval_vectors(t, times, coeffs, last, key_start, seg_start, loop, out):
     for o in range(out.shape[0]):
         k, s, past_end = _segment(times, key_start[o], key_start[o + 1], t, loop[o])
         if past_end:
-            out[o] = last[o]
+            for d in range(3):     # element by element: a row copy compiles numba's
+                out[o, d] = last[o, d]   # shape-mismatch message code (~1.5 s, issue 21)
             continue
         c = coeffs[seg_start[o] + k]
         for d in range(3):
@@ -69,7 +70,8 @@ def eval_slerp(t, times, quats, key_start, loop, out):
         a, b = key_start[o], key_start[o + 1]
         k, s, past_end = _segment(times, a, b, t, loop[o])
         if past_end:
-            out[o] = quats[b - 1]
+            for d in range(4):
+                out[o, d] = quats[b - 1, d]
             continue
         h = times[a + k + 1] - times[a + k]
         slerp_into(quats[a + k], quats[a + k + 1], s / h, out[o])

@@ -4,6 +4,8 @@ compile time measured apart by a warm-up; the work memory a render needs,
 checked before it starts."""
 import time
 
+import numpy as np
+
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
@@ -60,8 +62,9 @@ def warm_up(scene, shading, cfg, t):
     shade_ms 945 on a cold run; issue 20).
 
     On a cold cache a helper process compiles the surface half meanwhile
-    (compile_helper.py): this process first compiles the camera half, waits
-    for the helper, and then loads its kernels from the cache."""
+    (compile_helper.py): this process first compiles the camera half (and
+    the EXR write, to even the halves out), waits for the helper, and then
+    loads its kernels from the cache."""
     import tempfile
 
     from raycore.image_io import write_exr
@@ -76,6 +79,11 @@ def warm_up(scene, shading, cfg, t):
     if helper is not None:
         done = False
         try:
+            # the EXR write's half-float kernel first, which the helper reaches last
+            with tempfile.TemporaryDirectory() as tmp:
+                write_exr(f"{tmp}/warm.exr", {"RGBA": np.zeros((small.height, small.width, 4), np.float32),
+                                              "Z": np.zeros((small.height, small.width), np.float32)}, {},
+                          scene.spec.output.compression)
             renderer.trace_camera_only(t)
             renderer.trace_camera_only(t + dt)
             done = True
