@@ -118,7 +118,7 @@ def _light_is_dark(light) -> bool:
 
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
                  buffers: FrameBuffers = None, scene_grid: SceneGrid = None,
-                 camera_accel=None) -> FrameResult:
+                 camera_accel=None, shadow_accel=None) -> FrameResult:
     """Render one frame. Pass the same `buffers` and `scene_grid` for
     consecutive frames to reuse work arrays, image memory and static geometry;
     the returned images then belong to the buffers' ring (see FrameBuffers),
@@ -129,8 +129,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     packets (shadow_rays.py) through cfg.shadow_accel, shade the samples,
     scatter them into the image.
 
-    camera_accel: an object with trace_camera and trace_rays used for the
-    camera rays instead of building cfg.accel (the compile helper's stand-in,
+    camera_accel, shadow_accel: objects with the accelerators' methods used
+    for the camera or shadow rays instead of building cfg.accel or the
+    shadow structure (the compile helper's stand-ins,
     anim/render/compile_helper.py)."""
     W, H = cfg.width, cfg.height
     n_lights = shading.lights.shape[0]
@@ -149,10 +150,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     # their common surface (accelerators.py)
     t0 = time.perf_counter()
     shadow_name = cfg.shadow_accel or SHADOW_ACCEL
-    names = ({shadow_name} if cast_shadows else set()) | ({cfg.accel} if camera_accel is None else set())
+    names = (({shadow_name} if cast_shadows and shadow_accel is None else set())
+             | ({cfg.accel} if camera_accel is None else set()))
     tri_verts, built = build_structures(names, geom, cfg, scene_grid, buffers, counters)
     accel = built[cfg.accel] if camera_accel is None else camera_accel
-    shadow_accel = built.get(shadow_name)
+    shadow_accel = built.get(shadow_name) if shadow_accel is None else shadow_accel
     timings["build_ms"] = (time.perf_counter() - t0) * 1e3
 
     t0 = time.perf_counter()

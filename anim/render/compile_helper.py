@@ -3,13 +3,14 @@
 On a first run every kernel is compiled, one after another, on one core,
 while the other cores idle. The kernels split into two halves that need
 nothing of each other's results to be compiled: the camera half
-(interpolation, the camera rays' structure and traversal) and the surface
-half (the visible-surface gather, the shadow structure and its rays,
-shading, the EXR write). So the main process compiles the camera half
-while a helper process compiles the surface half, on camera hits made up
-with the right types (`MadeUpHits`: no camera structure is built there);
-each writes its kernels to numba's on-disk cache, and the main process's
-full warm-up then loads the helper's kernels instead of compiling them.
+(interpolation, the structures' builds, the camera rays' traversal, and the
+EXR write, which evens the halves out) and the surface half (the
+visible-surface gather, the shadow rays and their traversal, shading). So
+the main process compiles the camera half while a helper process compiles
+the surface half on camera hits and a shadow BVH made up with the right
+types (`MadeUpHits`, `made_up_bvh`: nothing is built there); each writes its
+kernels to numba's on-disk cache, and the main process's full warm-up then
+loads the helper's kernels instead of compiling them.
 
 Nothing changes the pictures: the helper only fills the cache, and its
 output is discarded. The helper is started only when the cache lacks the
@@ -102,6 +103,23 @@ class MadeUpHits:
         return self._hits(dirs.shape[0])
 
 
+def made_up_bvh(tri_verts, workspace):
+    """The shadow BVH's stand-in in the helper (its build and refit are the
+    camera half's): one leaf of the first 8 triangles in a box around
+    everything, with the types and layout of a built tree."""
+    from raycore.accelerators import BvhAccel
+    from raycore.bvh_build import CHILD, COUNT, empty_bvh
+    k = min(tri_verts.shape[0], 8)
+    bvh = empty_bvh(1, k)
+    bvh.node[0, :3] = -1e30
+    bvh.node[0, 3:6] = 1e30
+    bvh.node_i[0, CHILD] = 0
+    bvh.node_i[0, COUNT] = k
+    bvh.tri[:] = np.arange(k, dtype=np.int32)
+    bvh.verts[:] = tri_verts[:k]
+    return BvhAccel(bvh, tri_verts, workspace)
+
+
 def compile_surface_half(scene_path, camera, cfg, t) -> dict:
     """Run two frames and an EXR write of the scene with made-up camera hits
     (made-up vertices too: interpolation is the camera half's). {kernel: s}."""
@@ -110,6 +128,7 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
     from anim.render.compile_watch import watching
     from anim.render.settings import shading_of
     from anim.scene import AnimatedScene
+    from raycore.config import SHADOW_ACCEL
     from raycore.frame import CameraPose, FrameBuffers, Geometry, render_frame
     from raycore.image_io import write_exr
     from raycore.mesh import vertex_face_csr
@@ -125,9 +144,13 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
         buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *vf)
         camera_hits = MadeUpHits(scene.faces.shape[0])
+        shadow_bvh = None
+        if (cfg.shadow_accel or SHADOW_ACCEL) == "bvh":
+            shadow_bvh = made_up_bvh(np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9)), buffers.work)
         pose = CameraPose(*scene.camera_at(t))
-        for _ in range(2):        # the second frame takes the refit paths
-            result = render_frame(geom, shading, pose, cfg, buffers, scene_grid, camera_accel=camera_hits)
+        for _ in range(2):        # the second frame takes the per-frame paths
+            result = render_frame(geom, shading, pose, cfg, buffers, scene_grid, camera_accel=camera_hits,
+                                  shadow_accel=shadow_bvh)
         with tempfile.TemporaryDirectory() as tmp:
             write_exr(f"{tmp}/warm.exr", {"RGBA": result.rgba, "Z": result.z, **result.aovs}, {},
                       scene.spec.output.compression)

@@ -8,7 +8,7 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
-from raycore.config import RenderConfig
+from raycore.config import SHADOW_ACCEL, RenderConfig
 from raycore.camera import camera_basis
 from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_structures, render_frame
 from raycore.mesh import vertex_face_csr
@@ -41,11 +41,15 @@ class SceneRenderer:
         return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid)
 
     def trace_camera_only(self, t):
-        """Interpolate, build the camera rays' structure and trace them, and
-        nothing more: what warm_up compiles here while a helper compiles the rest."""
+        """Interpolate, build the structures (the camera rays' and the shadow
+        rays') and trace the camera rays, and nothing more: what warm_up
+        compiles here while a helper compiles the rest."""
         vertices = self.scene.vertices_at(t)
         geom = Geometry(vertices, self.scene.faces, self.scene.tri_material, self.scene.uvs, *self.vf)
-        _, built = build_structures({self.cfg.accel}, geom, self.cfg, self.scene_grid, self.buffers, {})
+        names = {self.cfg.accel}
+        if self.cfg.shadows and self.shading.lights.shape[0] > 0:
+            names.add(self.cfg.shadow_accel or SHADOW_ACCEL)
+        _, built = build_structures(names, geom, self.cfg, self.scene_grid, self.buffers, {})
         pose = CameraPose(*self.scene.camera_at(t))
         cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, self.cfg.width, self.cfg.height)
         built[self.cfg.accel].trace_camera(cam, self.cfg.width, self.cfg.height, (0.5, 0.5))
@@ -62,9 +66,9 @@ def warm_up(scene, shading, cfg, t):
     shade_ms 945 on a cold run; issue 20).
 
     On a cold cache a helper process compiles the surface half meanwhile
-    (compile_helper.py): this process first compiles the camera half (and
-    the EXR write, to even the halves out), waits for the helper, and then
-    loads its kernels from the cache."""
+    (compile_helper.py): this process first compiles the camera half (with
+    the structures' builds and the EXR write, to even the halves out), waits
+    for the helper, and then loads its kernels from the cache."""
     import tempfile
 
     from raycore.image_io import write_exr
