@@ -48,7 +48,9 @@ def _pose(kind, euler, axes, intrinsic, quat, matrix, trans, origin, parent, out
         elif kind[j] == QUATERNION:
             quat_to_matrix(quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3], r)
         elif kind[j] == MATRIX:
-            r[:, :] = matrix[j]
+            for a in range(3):    # element by element: a block copy compiles numba's
+                for b in range(3):    # shape-mismatch message (~2 s, issue 21)
+                    r[a, b] = matrix[j, a, b]
         p = parent[j]
         off = np.empty(3)
         for a in range(3):
