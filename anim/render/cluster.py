@@ -27,7 +27,8 @@ from anim.usd import is_usd
 
 # the worker's scenes: bundle digest -> WorkerScene (kept between tasks)
 _WORKER_SCENES = {}
-CONNECT_TIMEOUT_S = 10
+# how long connecting to a scheduler may take (FRUSTRACE_CONNECT_TIMEOUT_S)
+CONNECT_TIMEOUT_S = float(os.environ.get("FRUSTRACE_CONNECT_TIMEOUT_S", "10"))
 # how long a scheduler without workers is given to get one (FRUSTRACE_WORKER_WAIT_S)
 WORKER_WAIT_S = float(os.environ.get("FRUSTRACE_WORKER_WAIT_S", "30"))
 TASK_RETRIES = 3
@@ -277,7 +278,7 @@ def connect(scheduler=None, workers=None, security=None):
     thread.join(CONNECT_TIMEOUT_S)
     if thread.is_alive():
         raise SceneError("--scheduler", "", f"no Dask scheduler answered at {address} within "
-                                            f"{CONNECT_TIMEOUT_S} s (something listens there: a dashboard's "
+                                            f"{CONNECT_TIMEOUT_S:g} s (something listens there: a dashboard's "
                                             "port? the scheduler's is 8786 by default)") from None
     exc = result.get("error")
     if exc is None:
