@@ -41,8 +41,10 @@ def progress(n_frames, show):
                 return
             if not t0:
                 t0.append(time.perf_counter())
+            from anim.render.compile_helper import running
             now = watch.current
-            bar.update(task, what=f"compiling (first run only): {len(watch.done)} kernels"
+            bar.update(task, what=f"compiling (first run only{', two processes' if running else ''}): "
+                                  f"{len(watch.done)} kernels"
                                   + (f", now {now.rsplit('.', 1)[-1]}" if now else "")
                                   + f", {time.perf_counter() - t0[0]:.0f} s")
         yield on_frame, on_compile

@@ -50,6 +50,10 @@ def wanted() -> bool:
     return cores > 1 and not all(_cached(p) for p in _PROBES)
 
 
+# helpers running now (the progress line says so)
+running = set()
+
+
 class Helper:
     """The helper process compiling the surface half; finish() waits for it."""
 
@@ -62,13 +66,17 @@ class Helper:
         self.proc.stdin.write(pickle.dumps((str(scene.path), scene.camera_choice, cfg, t)))
         self.proc.stdin.close()
         self.proc.stdin = None        # communicate() must not flush it again
+        running.add(self)
 
     def finish(self, wait=True) -> dict:
         """{kernel: s} the helper compiled ({} if it failed: the main process
         then compiles what is missing). wait=False ends it at once."""
         if not wait:
             self.proc.kill()
-        out, _ = self.proc.communicate()
+        try:
+            out, _ = self.proc.communicate()
+        finally:
+            running.discard(self)
         if self.proc.returncode != 0:
             return {}
         try:
