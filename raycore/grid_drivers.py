@@ -57,6 +57,43 @@ def trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shar
              sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps, counters, tile, cull)
 
 
+@kernel
+def _camera_worker(queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
+                   grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
+    """One thread's share of trace_primary: tiles pulled from the queue until
+    none is left. A kernel of its own: numba's parfor passes over a large
+    loop body cost compile time (0.5 s here, issue 21)."""
+    tiles_x, n_tiles = tile_count(width, height, tile_size)
+    packets_x = (width + packet - 1) // packet
+    rays, work, _t, _b1, _b2, _prim, sub, sub_active, sub_done, sub_skip, mailbox = \
+        packet_scratch(packet, sub_size)
+    off_x, off_y = ray_offsets(sub_size)
+    while True:
+        tile = next_tile(queue, n_tiles)
+        if tile < 0:
+            break
+        tx0, ty0 = tile_corner(tile, tiles_x, tile_size)
+        for py in range(ty0, min(ty0 + tile_size, height), packet):
+            for px in range(tx0, min(tx0 + tile_size, width), packet):
+                pk = (py // packet) * packets_x + px // packet
+                hit_t = sw_t[pk]
+                hit_prim = sw_prim[pk]
+                hit_b1 = sw_b1[pk]
+                hit_b2 = sw_b2[pk]
+                K, s, n_live, k_ref, w_end = setup_camera(
+                    cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
+                    work, hit_t, hit_prim, sub, sub_active, grid.lo, grid.hi, eps)
+                if K < 0:
+                    camera_rays(rays, cam, px, py, packet, sub_size, width, height,
+                                jx, jy, off_x, off_y)
+                    dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, False, grid, tri_verts,
+                               counters, tile)
+                elif n_live > 0:
+                    walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
+                         k_ref, w_end, sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
+                         counters, tile, cull)
+
+
 @parallel_kernel
 def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
                   grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
@@ -70,37 +107,10 @@ def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_wor
     `unswizzle` turns them into row-major images. prim -1 = miss.
     counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
     """
-    tiles_x, n_tiles = tile_count(width, height, tile_size)
     queue = new_queue()
-    packets_x = (width + packet - 1) // packet
     for _w in prange(n_workers):
-        rays, work, _t, _b1, _b2, _prim, sub, sub_active, sub_done, sub_skip, mailbox = \
-            packet_scratch(packet, sub_size)
-        off_x, off_y = ray_offsets(sub_size)
-        while True:
-            tile = next_tile(queue, n_tiles)
-            if tile < 0:
-                break
-            tx0, ty0 = tile_corner(tile, tiles_x, tile_size)
-            for py in range(ty0, min(ty0 + tile_size, height), packet):
-                for px in range(tx0, min(tx0 + tile_size, width), packet):
-                    pk = (py // packet) * packets_x + px // packet
-                    hit_t = sw_t[pk]
-                    hit_prim = sw_prim[pk]
-                    hit_b1 = sw_b1[pk]
-                    hit_b2 = sw_b2[pk]
-                    K, s, n_live, k_ref, w_end = setup_camera(
-                        cam, px, py, packet, sub_size, width, height, jx, jy, off_x, off_y,
-                        work, hit_t, hit_prim, sub, sub_active, grid.lo, grid.hi, eps)
-                    if K < 0:
-                        camera_rays(rays, cam, px, py, packet, sub_size, width, height,
-                                    jx, jy, off_x, off_y)
-                        dda_packet(rays, hit_t, hit_b1, hit_b2, hit_prim, False, grid, tri_verts,
-                                   counters, tile)
-                    elif n_live > 0:
-                        walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
-                             k_ref, w_end, sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
-                             counters, tile, cull)
+        _camera_worker(queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
+                       grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
 
 
 @helper
