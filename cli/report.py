@@ -87,7 +87,8 @@ def summary_table(stats):
                         f"{len(stats['frames'])} frames (median ms per frame)")
     for col in ("interp", "build", "trace", "shade", "shadow", "write"):
         table.add_column(col, justify="right")
-    table.add_row(*(f"{med[k + '_ms']:.2f}" for k in ("interp", "build", "trace", "shade", "shadow", "write")))
+    table.add_row(*("-" if med[k + "_ms"] is None else f"{med[k + '_ms']:.2f}"
+                    for k in ("interp", "build", "trace", "shade", "shadow", "write")))
     console = Console()
     console.print(table)
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "

@@ -210,7 +210,10 @@ def summarize(rows, wall_s, compile_s) -> dict:
     return {"fps_raycast": fps_raycast, "fps_full": fps_full,
             "fps_wall": len(rows) / wall_s if rows and wall_s > 0 else 0.0,
             "compile_s": compile_s,
-            "median_ms": {k: median_ms(rows, k) for k in PHASE_KEYS}}
+            # null where no frame measured the phase (every frame recovered
+            # from killed runs has an unknown write time): unknown, not 0
+            "median_ms": {k: median_ms(rows, k) if any(r.get(k) is not None for r in rows) else None
+                          for k in PHASE_KEYS}}
 
 
 def stats_owner_problem(previous, scene):
