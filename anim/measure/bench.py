@@ -14,7 +14,7 @@ import numpy as np
 
 from anim import builtin
 from anim.errors import SceneError
-from anim.render.renderer import SceneRenderer
+from anim.render.renderer import SceneRenderer, warm_up
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import STRUCTURE_KEYS, fps_of, median_ms
 from anim.scene import AnimatedScene
@@ -55,8 +55,10 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
     scene = AnimatedScene(path)
     cfg = config_of(scene, width=res, height=res, packet=packet, threads=threads, aovs=(), accel=accel,
                     shadow_accel=shadow_accel)
-    renderer = SceneRenderer(scene, cfg, shading_of(scene))
+    shading = shading_of(scene)
     frames = scene.frame_numbers[:max(1, n_frames)]
+    warm_up(scene, shading, cfg, scene.time_of(frames[0]))    # a cold cache: compiled in two processes
+    renderer = SceneRenderer(scene, cfg, shading)
     rows = []
     for i, frame in enumerate([*warm_up_frames(scene), *frames], start=-1):
         interp_ms, result = renderer.render(scene.time_of(frame))

@@ -3,7 +3,7 @@ structures — build and trace times, fps, ray/triangle tests, cells or nodes
 visited per packet — and how much their images differ."""
 import numpy as np
 
-from anim.render.renderer import SceneRenderer
+from anim.render.renderer import SceneRenderer, warm_up
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
@@ -58,8 +58,10 @@ def compare(path, names, n_frames, res, threads, label=None):
     rows, images = [], {}
     for name in names:
         cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
-        renderer = SceneRenderer(scene, cfg, shading_of(scene))
-        for frame in warm_up_frames(scene):                           # compile / warm up
+        shading = shading_of(scene)
+        warm_up(scene, shading, cfg, scene.time_of(frames[0]))       # a cold cache: two processes
+        renderer = SceneRenderer(scene, cfg, shading)
+        for frame in warm_up_frames(scene):                           # warm up the frame loop
             renderer.render(scene.time_of(frame))
         timings = []
         for i, frame in enumerate(frames):
