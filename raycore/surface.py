@@ -5,7 +5,8 @@ Shading and every light read the same structure-of-arrays rows, so each
 hit's triangle, normals and material are gathered once, not once per light,
 and the per-light loops run over contiguous rows that vectorize.
 
-Arrays of n visible samples (pixels whose camera ray hit), row-major order:
+Arrays of n visible samples (pixels whose camera ray hit), in blocks of
+GATHER_BLOCK x GATHER_BLOCK pixels (row-major over the blocks and within each):
   pixel (n,) i32        row-major pixel index
   prim (n,) i32         triangle hit
   point (3, n) f32      hit point from the barycentrics
@@ -34,6 +35,7 @@ from .workspace import scratch
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
 HALF = np.float32(0.5)
+GATHER_BLOCK = 32        # the gather's pixel blocks: the largest camera packet
 
 
 class Surface(NamedTuple):
@@ -90,107 +92,122 @@ def sample_texture(tex_data, tex_info, tex, u, v):
 
 
 @parallel_arith_kernel
-def count_hits(hit_prim, row_off, col_off, row_count):
-    """Visible samples per image row (row_count (H,) i64)."""
+def count_hits(hit_prim, row_off, col_off, block, block_count):
+    """Visible samples per block of block x block pixels (block_count (n_blocks,)
+    i64, blocks row-major)."""
     width = col_off.shape[0]
-    for y in prange(row_off.shape[0]):
-        base = row_off[y]
+    height = row_off.shape[0]
+    blocks_x = (width + block - 1) // block
+    for b in prange(block_count.shape[0]):
+        x0 = (b % blocks_x) * block
+        y0 = (b // blocks_x) * block
         c = 0
-        for x in range(width):
-            c += 1 if hit_prim[base + col_off[x]] >= 0 else 0
-        row_count[y] = c
+        for y in range(y0, min(y0 + block, height)):
+            base = row_off[y]
+            for x in range(x0, min(x0 + block, width)):
+                c += 1 if hit_prim[base + col_off[x]] >= 0 else 0
+        block_count[b] = c
 
 
 @parallel_arith_kernel
-def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, row_start,
+def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block, block_start,
                  tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
                  pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess,
                  hit_t, n_threads):
-    """Fill the Surface rows of the visible samples; row y's samples start at
-    row_start[y]. Normals are turned to the viewer's side; the lift and the
-    smooth normal use the vertex normals turned the same way."""
+    """Fill the Surface rows of the visible samples, block by block of
+    block x block pixels (block b's samples start at block_start[b]), each
+    block's rows in turn: the order the camera packets wrote their hits in,
+    so that the hits are read a cache line at a time (rows of the whole
+    image read 32 of a packet's values and jumped: 10.5 against 9.6 ms on
+    hand at 1024^2). Normals are turned to the viewer's side; the lift and
+    the smooth normal use the vertex normals turned the same way."""
     width = col_off.shape[0]
     height = row_off.shape[0]
+    blocks_x = (width + block - 1) // block
+    n_blocks = block_start.shape[0] - 1
     has_uv = uvs.shape[0] > 0
     smooth = faces.shape[0] > 0          # vertex normals given: lift and smooth normal
-    # rows dealt out in turn: prange splits statically, and the visible
+    # blocks dealt out in turn: prange splits statically, and the visible
     # surface is rarely spread evenly over the image's halves
     for t in prange(n_threads):
-        for y in range(t, height, n_threads):
-            i = row_start[y]
-            base = row_off[y]
-            for x in range(width):
-                k = base + col_off[x]
-                prim = hit_prim[k]
-                if prim < 0:
-                    continue
-                pixel[i] = y * width + x
-                prim_out[i] = prim
-                b1 = hit_b1[k]
-                b2 = hit_b2[k]
-                b0 = F1 - b1 - b2
-                dx, dy, dz = primary_dir(cam, x, y, jx, jy)
-                view[0, i] = dx
-                view[1, i] = dy
-                view[2, i] = dz
-                depth[i] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
-                # point and unit geometric normal, turned to the viewer; the
-                # largest vertex coordinate scales the point's float32 error
-                px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
-                m = F0
-                for c in range(9):
-                    m = max(m, abs(tri_verts[prim, c]))
-                side = F1
-                if gx * dx + gy * dy + gz * dz > F0:
-                    gx, gy, gz = -gx, -gy, -gz
-                    side = -F1
-                # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
-                qx = qy = qz = F0
-                sx = sy = sz = F0
-                i0 = faces[prim, 0] if smooth else 0
-                i1 = faces[prim, 1] if smooth else 0
-                i2 = faces[prim, 2] if smooth else 0
-                for c in range(3 if smooth else 0):
-                    w = b0 if c == 0 else (b1 if c == 1 else b2)
-                    v = i0 if c == 0 else (i1 if c == 1 else i2)
-                    nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
-                    d = ((px - tri_verts[prim, 3 * c]) * nx + (py - tri_verts[prim, 3 * c + 1]) * ny
-                         + (pz - tri_verts[prim, 3 * c + 2]) * nz)
-                    lift = -w * min(d, F0)
-                    qx += lift * nx
-                    qy += lift * ny
-                    qz += lift * nz
-                    sx += w * nx
-                    sy += w * ny
-                    sz += w * nz
-                sl = np.sqrt(sx * sx + sy * sy + sz * sz)
-                if sl > F0:
-                    sx, sy, sz = sx / sl, sy / sl, sz / sl
-                else:
-                    sx, sy, sz = gx, gy, gz
-                lx, ly, lz = px + qx, py + qy, pz + qz
-                store3(point, i, px, py, pz)
-                store3(lifted, i, lx, ly, lz)
-                mag[i] = max(m, abs(lx), abs(ly), abs(lz))
-                store3(geo_n, i, gx, gy, gz)
-                store3(smooth_n, i, sx, sy, sz)
-                # material, texture applied
-                mat = tri_material[prim]
-                kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]
-                tex = int(materials[mat, 5])
-                if tex >= 0 and has_uv and smooth:
-                    tu = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
-                    tv = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
-                    tr, tg, tb = sample_texture(tex_data, tex_info, tex, tu, tv)
-                    kr *= tr
-                    kg *= tg
-                    kb *= tb
-                albedo[0, i] = kr
-                albedo[1, i] = kg
-                albedo[2, i] = kb
-                ks[i] = materials[mat, 3]
-                shininess[i] = materials[mat, 4]
-                i += 1
+        for b in range(t, n_blocks, n_threads):
+            i = block_start[b]
+            x0 = (b % blocks_x) * block
+            y0 = (b // blocks_x) * block
+            for y in range(y0, min(y0 + block, height)):
+                base = row_off[y]
+                for x in range(x0, min(x0 + block, width)):
+                    k = base + col_off[x]
+                    prim = hit_prim[k]
+                    if prim < 0:
+                        continue
+                    pixel[i] = y * width + x
+                    prim_out[i] = prim
+                    b1 = hit_b1[k]
+                    b2 = hit_b2[k]
+                    b0 = F1 - b1 - b2
+                    dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+                    view[0, i] = dx
+                    view[1, i] = dy
+                    view[2, i] = dz
+                    depth[i] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
+                    # point and unit geometric normal, turned to the viewer; the
+                    # largest vertex coordinate scales the point's float32 error
+                    px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
+                    m = F0
+                    for c in range(9):
+                        m = max(m, abs(tri_verts[prim, c]))
+                    side = F1
+                    if gx * dx + gy * dy + gz * dz > F0:
+                        gx, gy, gz = -gx, -gy, -gz
+                        side = -F1
+                    # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
+                    qx = qy = qz = F0
+                    sx = sy = sz = F0
+                    i0 = faces[prim, 0] if smooth else 0
+                    i1 = faces[prim, 1] if smooth else 0
+                    i2 = faces[prim, 2] if smooth else 0
+                    for c in range(3 if smooth else 0):
+                        w = b0 if c == 0 else (b1 if c == 1 else b2)
+                        v = i0 if c == 0 else (i1 if c == 1 else i2)
+                        nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
+                        d = ((px - tri_verts[prim, 3 * c]) * nx + (py - tri_verts[prim, 3 * c + 1]) * ny
+                             + (pz - tri_verts[prim, 3 * c + 2]) * nz)
+                        lift = -w * min(d, F0)
+                        qx += lift * nx
+                        qy += lift * ny
+                        qz += lift * nz
+                        sx += w * nx
+                        sy += w * ny
+                        sz += w * nz
+                    sl = np.sqrt(sx * sx + sy * sy + sz * sz)
+                    if sl > F0:
+                        sx, sy, sz = sx / sl, sy / sl, sz / sl
+                    else:
+                        sx, sy, sz = gx, gy, gz
+                    lx, ly, lz = px + qx, py + qy, pz + qz
+                    store3(point, i, px, py, pz)
+                    store3(lifted, i, lx, ly, lz)
+                    mag[i] = max(m, abs(lx), abs(ly), abs(lz))
+                    store3(geo_n, i, gx, gy, gz)
+                    store3(smooth_n, i, sx, sy, sz)
+                    # material, texture applied
+                    mat = tri_material[prim]
+                    kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]
+                    tex = int(materials[mat, 5])
+                    if tex >= 0 and has_uv and smooth:
+                        tu = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+                        tv = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+                        tr, tg, tb = sample_texture(tex_data, tex_info, tex, tu, tv)
+                        kr *= tr
+                        kg *= tg
+                        kb *= tb
+                    albedo[0, i] = kr
+                    albedo[1, i] = kg
+                    albedo[2, i] = kb
+                    ks[i] = materials[mat, 3]
+                    shininess[i] = materials[mat, 4]
+                    i += 1
 
 
 def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
@@ -201,11 +218,13 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
     triangle, or (0, 3) arrays for flat facets (no lift, geometric normals).
     With a Workspace the arrays are reused buffers, valid until its next use."""
     height = row_off.shape[0]
-    row_count = np.empty(height, np.int64)
-    count_hits(hit_prim, row_off, col_off, row_count)
-    row_start = np.zeros(height + 1, np.int64)
-    np.cumsum(row_count, out=row_start[1:])
-    n = int(row_start[-1])
+    width = col_off.shape[0]
+    n_blocks = -(-width // GATHER_BLOCK) * -(-height // GATHER_BLOCK)
+    block_count = np.empty(n_blocks, np.int64)
+    count_hits(hit_prim, row_off, col_off, GATHER_BLOCK, block_count)
+    block_start = np.zeros(n_blocks + 1, np.int64)
+    np.cumsum(block_count, out=block_start[1:])
+    n = int(block_start[-1])
     f32 = np.float32
 
     pixels = height * col_off.shape[0]          # the most samples a pass can have
@@ -216,6 +235,6 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
                        else (3, n), np.int32 if name in ("pixel", "prim") else f32)
                   for name in Surface._fields))
     fill_surface(cam, f32(jitter[0]), f32(jitter[1]), hit_prim, hit_b1, hit_b2, row_off, col_off,
-                 row_start, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
+                 GATHER_BLOCK, block_start, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
                  tex_info, *s, hit_t, numba.get_num_threads())
     return s
