@@ -57,3 +57,5 @@ def test_the_wheel_installs_and_renders_the_demo_outside_the_tree(tmp_path):
     assert {"raycore.grid_drivers.trace_primary", "raycore.bvh_build.build_region"} <= here
     assert surface_half <= helper and not surface_half & here, (here, helper)
     assert "raycore.bvh_build.build_region" not in helper            # the helper's BVH is made up
+    # this process's made-up scatter (no samples) had the real call's types
+    assert "raycore.shade.write_pixels" in here and "raycore.shade.write_pixels" not in helper

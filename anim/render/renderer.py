@@ -13,6 +13,7 @@ from raycore.camera import camera_basis
 from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_structures, render_frame
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
+from raycore.shade import write_pixels
 
 
 class SceneRenderer:
@@ -67,8 +68,9 @@ def warm_up(scene, shading, cfg, t):
 
     On a cold cache a helper process compiles the surface half meanwhile
     (compile_helper.py): this process first compiles the camera half (with
-    the structures' builds and the EXR write, to even the halves out), waits
-    for the helper, and then loads its kernels from the cache."""
+    the structures' builds and the image's scatter and EXR write, to even the
+    halves out), waits for the helper, and then loads its kernels from the
+    cache."""
     import tempfile
 
     from raycore.image_io import write_exr
@@ -83,10 +85,14 @@ def warm_up(scene, shading, cfg, t):
     if helper is not None:
         done = False
         try:
-            # the EXR write's half-float kernel first, which the helper reaches last
+            # the image's kernels first, which the helper reaches last: the
+            # scatter of shaded samples (none here) and the EXR write's half floats
+            rgba, z = renderer.buffers.image()
+            write_pixels(np.zeros(0, np.int32), np.zeros((3, 0), np.float32), np.zeros(0, np.float32),
+                         np.asarray(small.background, np.float32), np.float32(1.0), False, rgba, z)
             with tempfile.TemporaryDirectory() as tmp:
-                write_exr(f"{tmp}/warm.exr", {"RGBA": np.zeros((small.height, small.width, 4), np.float32),
-                                              "Z": np.zeros((small.height, small.width), np.float32)}, {},
+                write_exr(f"{tmp}/warm.exr", {"RGBA": rgba.reshape(small.height, small.width, 4),
+                                              "Z": z.reshape(small.height, small.width)}, {},
                           scene.spec.output.compression)
             renderer.trace_camera_only(t)
             renderer.trace_camera_only(t + dt)
