@@ -29,6 +29,7 @@ from numba import prange
 
 from ._jit import helper, parallel_arith_kernel
 from .camera import primary_dir
+from .tile_queue import tile_corner, tile_count
 from .triangle import surface_point
 from .workspace import scratch
 
@@ -97,10 +98,9 @@ def count_hits(hit_prim, row_off, col_off, block, block_count):
     i64, blocks row-major)."""
     width = col_off.shape[0]
     height = row_off.shape[0]
-    blocks_x = (width + block - 1) // block
+    blocks_x, _ = tile_count(width, height, block)
     for b in prange(block_count.shape[0]):
-        x0 = (b % blocks_x) * block
-        y0 = (b // blocks_x) * block
+        x0, y0 = tile_corner(b, blocks_x, block)
         c = 0
         for y in range(y0, min(y0 + block, height)):
             base = row_off[y]
@@ -123,8 +123,7 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
     the smooth normal use the vertex normals turned the same way."""
     width = col_off.shape[0]
     height = row_off.shape[0]
-    blocks_x = (width + block - 1) // block
-    n_blocks = block_start.shape[0] - 1
+    blocks_x, n_blocks = tile_count(width, height, block)
     has_uv = uvs.shape[0] > 0
     smooth = faces.shape[0] > 0          # vertex normals given: lift and smooth normal
     # blocks dealt out in turn: prange splits statically, and the visible
@@ -132,8 +131,7 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
     for t in prange(n_threads):
         for b in range(t, n_blocks, n_threads):
             i = block_start[b]
-            x0 = (b % blocks_x) * block
-            y0 = (b // blocks_x) * block
+            x0, y0 = tile_corner(b, blocks_x, block)
             for y in range(y0, min(y0 + block, height)):
                 base = row_off[y]
                 for x in range(x0, min(x0 + block, width)):
@@ -219,7 +217,7 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
     With a Workspace the arrays are reused buffers, valid until its next use."""
     height = row_off.shape[0]
     width = col_off.shape[0]
-    n_blocks = -(-width // GATHER_BLOCK) * -(-height // GATHER_BLOCK)
+    _, n_blocks = tile_count(width, height, GATHER_BLOCK)
     block_count = np.empty(n_blocks, np.int64)
     count_hits(hit_prim, row_off, col_off, GATHER_BLOCK, block_count)
     block_start = np.zeros(n_blocks + 1, np.int64)
