@@ -4,7 +4,7 @@ On a first run every kernel is compiled, one after another, on one core,
 while the other cores idle. The kernels split into two halves that need
 nothing of each other's results to be compiled: the camera half
 (interpolation, the structures' builds, the camera rays' traversal, and the
-EXR write, which evens the halves out) and the surface half (the
+image scatter and EXR write, which even the halves out) and the surface half (the
 visible-surface gather, the shadow rays and their traversal, shading). So
 the main process compiles the camera half while a helper process compiles
 the surface half on camera hits and a shadow BVH made up with the right
@@ -129,39 +129,32 @@ def made_up_bvh(tri_verts, workspace):
 
 
 def compile_surface_half(scene_path, camera, cfg, t) -> dict:
-    """Run two frames and an EXR write of the scene with made-up camera hits
-    (made-up vertices too: interpolation is the camera half's). {kernel: s}."""
-    import tempfile
-
+    """Run two frames of the scene with made-up camera hits, made-up
+    vertices (interpolation is the camera half's) and, for BVH shadows, a
+    made-up tree (the builds are the camera half's, and so is the EXR
+    write). {kernel: s}."""
     from anim.render.compile_watch import watching
+    from anim.render.renderer import SceneRenderer
     from anim.render.settings import shading_of
     from anim.scene import AnimatedScene
     from raycore.config import SHADOW_ACCEL
-    from raycore.frame import CameraPose, FrameBuffers, Geometry, render_frame
-    from raycore.image_io import write_exr
-    from raycore.mesh import vertex_face_csr
-    from raycore.scene_grid import SceneGrid
+    from raycore.frame import CameraPose, Geometry, render_frame
 
     scene = AnimatedScene(scene_path, camera)
     shading = shading_of(scene)
     vertices = np.random.default_rng(0).random((scene.n_vertices, 3), dtype=np.float32)
-    vf = vertex_face_csr(scene.faces, scene.n_vertices)
     with watching() as watch:
-        scene_grid = SceneGrid(scene.faces, scene.n_vertices, *vf, cfg.grid_density,
-                               scene.moving_triangles, scene.moving_object_ranges)
-        buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet)
-        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *vf)
+        renderer = SceneRenderer(scene, cfg, shading)        # its buffers and static geometry
+        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *renderer.vf)
         camera_hits = MadeUpHits(scene.faces.shape[0])
         shadow_bvh = None
         if (cfg.shadow_accel or SHADOW_ACCEL) == "bvh":
-            shadow_bvh = made_up_bvh(np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9)), buffers.work)
+            shadow_bvh = made_up_bvh(np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9)),
+                                     renderer.buffers.work)
         pose = CameraPose(*scene.camera_at(t))
         for _ in range(2):        # the second frame takes the per-frame paths
-            result = render_frame(geom, shading, pose, cfg, buffers, scene_grid, camera_accel=camera_hits,
-                                  shadow_accel=shadow_bvh)
-        with tempfile.TemporaryDirectory() as tmp:
-            write_exr(f"{tmp}/warm.exr", {"RGBA": result.rgba, "Z": result.z, **result.aovs}, {},
-                      scene.spec.output.compression)
+            render_frame(geom, shading, pose, cfg, renderer.buffers, renderer.scene_grid,
+                         camera_accel=camera_hits, shadow_accel=shadow_bvh)
     return watch.seconds()
 
 
