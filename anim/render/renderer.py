@@ -71,10 +71,6 @@ def warm_up(scene, shading, cfg, t):
     the structures' builds and the image's scatter and EXR write, to even the
     halves out), waits for the helper, and then loads its kernels from the
     cache."""
-    import tempfile
-
-    from raycore.image_io import write_exr
-
     from . import compile_helper
     t0 = time.perf_counter()
     dt = 1.0 / scene.spec.frames.fps
@@ -90,10 +86,8 @@ def warm_up(scene, shading, cfg, t):
             rgba, z = renderer.buffers.image()
             write_pixels(np.zeros(0, np.int32), np.zeros((3, 0), np.float32), np.zeros(0, np.float32),
                          np.asarray(small.background, np.float32), np.float32(1.0), False, rgba, z)
-            with tempfile.TemporaryDirectory() as tmp:
-                write_exr(f"{tmp}/warm.exr", {"RGBA": rgba.reshape(small.height, small.width, 4),
-                                              "Z": z.reshape(small.height, small.width)}, {},
-                          scene.spec.output.compression)
+            _write_trial({"RGBA": rgba.reshape(small.height, small.width, 4),
+                          "Z": z.reshape(small.height, small.width)}, scene.spec.output.compression)
             renderer.trace_camera_only(t)
             renderer.trace_camera_only(t + dt)
             done = True
@@ -101,10 +95,18 @@ def warm_up(scene, shading, cfg, t):
             helper_compiled = helper.finish(wait=done)
     renderer.render(t)
     _, result = renderer.render(t + dt)
-    with tempfile.TemporaryDirectory() as tmp:
-        write_exr(f"{tmp}/warm.exr", {"RGBA": result.rgba, "Z": result.z, **result.aovs}, {},
-                  scene.spec.output.compression)
+    _write_trial({"RGBA": result.rgba, "Z": result.z, **result.aovs}, scene.spec.output.compression)
     return time.perf_counter() - t0, helper_compiled
+
+
+def _write_trial(channels, compression):
+    """An EXR of these channels into a temporary directory, and gone: what
+    compiles (or loads) the write's kernels."""
+    import tempfile
+
+    from raycore.image_io import write_exr
+    with tempfile.TemporaryDirectory() as tmp:
+        write_exr(f"{tmp}/warm.exr", channels, {}, compression)
 
 
 # bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),
