@@ -341,7 +341,9 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
         out, k = [], 0
         for s in surfaces:
             n_hit = s.pixel.shape[0]
-            out.append((s.pixel, rgb[:, k:k + n_hit], s.depth))
+            # a copy: a slice of the columns is C-contiguous only when it is
+            # all of them, and add_pass would compile a second layout mid-render
+            out.append((s.pixel, np.ascontiguousarray(rgb[:, k:k + n_hit]), s.depth))
             k += n_hit
         return out
 

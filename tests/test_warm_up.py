@@ -14,7 +14,9 @@ DEMO = ROOT / "anim" / "builtin" / "demo" / "anim.yaml"
 
 
 @pytest.mark.parametrize("overrides", ["{}", "dict(spp=4, accel='bvh', aovs=('N', 'P', 'id'))",
-                                       "dict(max_error=0.01, accel='kdtree')"])
+                                       # 0.05: few pixels stay above the budget, so a group
+                                       # of passes shades several passes' samples at once
+                                       "dict(max_error=0.05, accel='kdtree')"])
 def test_no_kernel_compiles_after_the_warm_up(overrides):
     out = subprocess.run([sys.executable, str(ROOT / "tests" / "warm_check.py"), str(DEMO), overrides],
                          capture_output=True, text=True, timeout=600, cwd=ROOT)
