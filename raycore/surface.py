@@ -225,7 +225,7 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
     n = int(block_start[-1])
     f32 = np.float32
 
-    pixels = height * col_off.shape[0]          # the most samples a pass can have
+    pixels = height * width                     # the most samples a pass can have
 
     def take(name, shape, dtype=f32):
         return scratch(workspace, "surface." + name, shape, dtype, pixels * (3 if len(shape) > 1 else 1))

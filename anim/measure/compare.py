@@ -55,10 +55,10 @@ def compare(path, names, n_frames, res, threads, label=None):
     scene = AnimatedScene(path)
     frames = scene.frame_numbers[:max(1, n_frames)]
     width, height = compare_size(scene, res)
+    shading = shading_of(scene)                 # textures read once, for every structure
     rows, images = [], {}
     for name in names:
         cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
-        shading = shading_of(scene)
         warm_up(scene, shading, cfg, scene.time_of(frames[0]))       # a cold cache: two processes
         renderer = SceneRenderer(scene, cfg, shading)
         for frame in warm_up_frames(scene):                           # warm up the frame loop

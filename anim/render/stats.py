@@ -189,12 +189,12 @@ def merged_stats(previous, scene, cfg, rows, run) -> dict:
             "frames": merged, "runs": runs + [run], "summary": summary}
 
 
-def median_ms(rows, *keys) -> float:
-    """Median over frames of the sum of the given phase timings (0 if none),
-    over the frames that measured them all (a recovered frame's write_ms is
-    unknown, None)."""
+def median_ms(rows, *keys, missing=0.0):
+    """Median over frames of the sum of the given phase timings, over the
+    frames that measured them all (a recovered frame's write_ms is unknown,
+    None); `missing` when no frame did."""
     sums = [sum(r[k] for k in keys) for r in rows if all(r.get(k) is not None for k in keys)]
-    return float(np.median(sums)) if sums else 0.0
+    return float(np.median(sums)) if sums else missing
 
 
 def fps_of(rows):
@@ -212,8 +212,7 @@ def summarize(rows, wall_s, compile_s) -> dict:
             "compile_s": compile_s,
             # null where no frame measured the phase (every frame recovered
             # from killed runs has an unknown write time): unknown, not 0
-            "median_ms": {k: median_ms(rows, k) if any(r.get(k) is not None for r in rows) else None
-                          for k in PHASE_KEYS}}
+            "median_ms": {k: median_ms(rows, k, missing=None) for k in PHASE_KEYS}}
 
 
 def stats_owner_problem(previous, scene):
