@@ -5,7 +5,8 @@ so are inf and NaN anywhere (`allow_inf_nan=False`), a camera given both
 fixed values and keys, a zero light direction and an output path that is
 not one `.exr` name with at most one run of '#'.
 Extensions beyond the spec's example (all optional, backward compatible):
-`render.ambient`, `render.grid_density`, lights of `type: directional`,
+`render.ambient`, `render.grid_density`, `render.motion_blur`,
+`camera.aperture_radius` and `camera.focus_distance`, lights of `type: directional`,
 more interpolation methods (anim/interpolate.py), rotation tracks with
 `slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
 glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`, USD stages as
@@ -89,6 +90,10 @@ class Camera(Strict):
     fov: Annotated[float, Field(gt=0, lt=180)] = 40.0
     keys: Optional[List[CameraKey]] = None
     interpolation: Interp = "catmull-rom"
+    # thin lens (depth of field): radius in scene units, 0 = pinhole; the sharp
+    # plane's distance along the view axis, None = the eye's distance to look_at
+    aperture_radius: Annotated[float, Field(ge=0, le=1e37)] = 0.0
+    focus_distance: Optional[Annotated[float, Field(gt=0, le=1e37)]] = None
 
     @model_validator(mode="after")
     def _static_or_keyed(self):
@@ -101,6 +106,13 @@ class Camera(Strict):
             raise ValueError(f"has both keys and {', '.join(fixed)}: with keys, every key carries "
                              "its own eye, look_at, up and fov; remove the fixed ones")
         return self
+
+
+class MotionBlur(Strict):
+    # frame intervals the shutter is open (0 = off; 0.5 = the film "180 degree" shutter)
+    shutter: Annotated[float, Field(ge=0, le=1000)] = 0.0
+    # where the frame's time lies: the middle of the shutter, its opening or its closing
+    position: Literal["center", "start", "end"] = "center"
 
 
 class Render(Strict):
@@ -120,6 +132,7 @@ class Render(Strict):
     # samples (up to spp, or 64 when spp is 1) only where the estimated error
     # is above it; 0 = off (raycore/adaptive.py)
     max_error: Annotated[float, Field(ge=0, le=1)] = 0.0
+    motion_blur: MotionBlur = MotionBlur()
 
     @field_validator("packet")
     @classmethod

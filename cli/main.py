@@ -555,6 +555,15 @@ def check(anim_yaml, camera, strict):
     click.echo(f"  {_count(len(spec.lights), 'light')}, {_count(len(scene.materials) - 1, 'material')}, "
                f"{_count(len(scene.texture_paths), 'texture')}, "
                f"camera {'animated' if spec.camera.keys else 'static'}")
+    blur, cam = spec.render.motion_blur, spec.camera
+    if blur.shutter > 0:
+        click.echo(f"  motion blur: shutter {blur.shutter:g} frame intervals ({blur.shutter / spec.frames.fps * 1e3:.4g} ms), "
+                   f"{blur.position}; one shutter time per pass, {spec.render.spp} per frame"
+                   + ("" if moving or cam.keys else " (nothing moves: off)"))
+    if cam.aperture_radius > 0:
+        focus = f"{cam.focus_distance:g}" if cam.focus_distance else "the eye's distance to look_at"
+        click.echo(f"  depth of field: aperture radius {cam.aperture_radius:g}, focus distance {focus}; "
+                   f"one lens position per pass, {spec.render.spp} per frame")
     for o in scene.objects:
         kind = "static" if o.static else ("rigid" if o.rigid else "deforming")
         click.echo(f"    {o.name}: {_count(len(o.faces), 'triangle')}, {kind}")

@@ -140,7 +140,7 @@ def with_border_ring(rgba, width, height, bg, trace_passes):
     return padded.reshape(-1, 4)
 
 
-def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
+def refine(rgba, z, width, height, background, max_error, cap, trace_passes, times_lens=None):
     """Spend samples where the 1-spp image `rgba` (H*W, 4), `z` (H*W,) is
     above `max_error`, up to the plain `cap`-sample set per pixel (plus the
     nested samples before it, sampling.budget_offsets), and write the means
@@ -152,7 +152,9 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     of `offsets`, shades the samples and returns per offset (surface_pixel,
     rgb (3, k), depth (k,)) of those that hit; aov=False: samples that are
     not the pixel's (the border ring, offsets outside [0, 1]), kept out of
-    the AOVs.
+    the AOVs. times_lens: (time, lens_x, lens_y) of each budget offset
+    (shutter_lens.budget_times_lens) under motion blur or a thin lens; the
+    offsets handed to trace_passes are then (jx, jy, time, lens_x, lens_y).
 
     Returns (samples per pixel (H*W,) int32, error estimate (H*W,) f32):
     the estimate a pixel stopped at (1 spp: the neighbour contrast)."""
@@ -176,6 +178,8 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes):
     slot[active] = np.arange(m)
     value = np.empty((m, 4), np.float32)
     offsets, totals = budget_offsets(cap)
+    if times_lens is not None:
+        offsets = [o + tuple(s) for o, s in zip(offsets, times_lens)]
     done = 1
     live = np.arange(m)                                   # slots still above the budget
     for total in totals:

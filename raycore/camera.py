@@ -1,14 +1,16 @@
-"""Pinhole camera rays exactly as ../shared/SPEC.md section 3 fixes them."""
+"""Camera rays exactly as ../shared/SPEC.md section 3 fixes them, and the
+thin lens of depth of field as one pinhole per lens position."""
 import numpy as np
 
 from ._jit import helper
 
 
 def camera_basis(eye, look_at, up, fov_deg, width, height, dtype=np.float32):
-    """Pack the camera as a (16,) array for the kernels (float32; float64
+    """Pack the camera as a (19,) array for the kernels (float32; float64
     for references): eye(3), forward(3), right(3), up'(3), h*aspect, h,
-    2 h aspect / W, 2 h / H with h = tan(fov/2), aspect = W/H. Computed in
-    float64, rounded once."""
+    2 h aspect / W, 2 h / H with h = tan(fov/2), aspect = W/H, and the view
+    axis(3) that Z is measured along (the forward of a pinhole; thin_lens
+    shears the forward and keeps this). Computed in float64, rounded once."""
     eye = np.asarray(eye, np.float64)
     f = np.asarray(look_at, np.float64) - eye
     f /= np.linalg.norm(f)
@@ -20,7 +22,23 @@ def camera_basis(eye, look_at, up, fov_deg, width, height, dtype=np.float32):
     u = np.cross(r, f)
     h = np.tan(np.radians(fov_deg) / 2.0)
     a = width / height
-    return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height]]).astype(dtype)
+    return np.concatenate([eye, f, r, u, [h * a, h, 2 * h * a / width, 2 * h / height], f]).astype(dtype)
+
+
+def thin_lens(cam, lens_x, lens_y, aperture_radius, focus_distance):
+    """The camera of one lens position: a ray from the lens point
+    o = eye + A (x right + y up') toward the point that the pinhole ray
+    through the same pixel meets on the focus plane (distance F along the
+    view axis), eye + F (forward + u right + v up'). Its direction,
+    divided by F, is forward - (A/F)(x right + y up') + u right + v up':
+    the pinhole formula with the eye moved to o and the forward sheared, so
+    every kernel keeps working, and a pass's camera rays still share one
+    origin and stay frustum packets. (x, y) is a point of the unit disc."""
+    out = np.array(cam, np.float64)
+    ax, ay = aperture_radius * lens_x, aperture_radius * lens_y
+    out[0:3] += ax * out[6:9] + ay * out[9:12]
+    out[3:6] -= (ax * out[6:9] + ay * out[9:12]) / focus_distance
+    return out.astype(np.asarray(cam).dtype)
 
 
 def pixel_centre_rays(cam, width, height):

@@ -74,3 +74,7 @@ class RenderConfig:
     grid_cull: bool = True         # grid: frustum culling and mailboxes (off only to measure them)
     light_probes: int = 0          # area lights: trace this many emitters first, the rest only in penumbrae (0 = all)
     max_error: float = 0.0         # error budget per pixel (linear RGBA); > 0: adaptive samples, spp the cap
+    shutter: float = 0.0           # motion blur: the shutter is open this many frame intervals (0 = off)
+    shutter_position: str = "center"   # where the frame time lies in the shutter: center | start | end
+    aperture_radius: float = 0.0   # thin lens radius in scene units (0 = pinhole)
+    focus_distance: float = 0.0    # distance of the sharp plane along the view axis (0 = eye to look_at)

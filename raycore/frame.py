@@ -12,13 +12,14 @@ import numpy as np
 
 from .accelerators import KD_PACKET, BvhAccel, GridAccel, KdAccel
 from .adaptive import camera_rays_of, refine
-from .camera import camera_basis
+from .camera import camera_basis, thin_lens
 from .config import ADAPTIVE_SPP_CAP, SHADOW_ACCEL, RenderConfig
 from .kdtree_build import build_kdtree
 from .sampling import sample_offsets
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
 from .shadow_rays import LightRays
+from .shutter_lens import budget_times_lens, plain_times_lens
 from .surface import Surface, visible_surface
 from .trace import camera_buffers, row_major_offsets
 from .workspace import Workspace
@@ -116,9 +117,73 @@ def _light_is_dark(light) -> bool:
     return not np.any(light[4:7] > 0)
 
 
+class PassScene:
+    """The structures, vertex normals and camera that a pass traces: built
+    once for a frame without motion blur, moved to each pass's time under
+    it (rebuilt only when the vertices or the camera changed: what does not
+    move within the shutter is not built again), and the camera put at each
+    pass's lens position under a thin lens."""
+
+    def __init__(self, names, geom, pose, cfg, scene_grid, buffers, counters, timings, motion,
+                 camera_accel, shadow_accel):
+        self.names, self.geom, self.cfg, self.scene_grid = names, geom, cfg, scene_grid
+        self.buffers, self.counters, self.timings, self.motion = buffers, counters, timings, motion
+        self.camera_accel, self.fixed_shadow_accel = camera_accel, shadow_accel
+        self.key = None                      # (time, lens) of what is built now
+        self.built_vertices = None           # the vertices the structures were built over
+        self.pose = self.pinhole = None
+        self.times_seen, self.lens_seen = set(), set()
+        if motion is None:                   # else the first pass's move_to builds
+            self.build(geom.vertices, pose)
+
+    def build(self, vertices, pose):
+        cfg, t0 = self.cfg, time.perf_counter()
+        if self.built_vertices is None or not np.array_equal(vertices, self.built_vertices):
+            geom = self.geom._replace(vertices=vertices)
+            self.tri_verts, built = build_structures(self.names, geom, self.cfg, self.scene_grid, self.buffers,
+                                                     self.counters)
+            self.accel = built[cfg.accel] if self.camera_accel is None else self.camera_accel
+            self.shadow_accel = (built.get(cfg.shadow_accel or SHADOW_ACCEL) if self.fixed_shadow_accel is None
+                                 else self.fixed_shadow_accel)
+            self.built_vertices = vertices.copy() if self.motion is not None else vertices
+            self.counters["builds"] += 1
+            self.timings["build_ms"] += (time.perf_counter() - t0) * 1e3
+            t0 = time.perf_counter()
+            self.normals = self.scene_grid.normals_now()
+            self.timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
+        if pose != self.pose:
+            self.pose = pose
+            self.pinhole = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, cfg.width, cfg.height)
+        self.cam = self.pinhole
+
+    def move_to(self, sample):
+        """Structures and camera of a pass at (time, lens_x, lens_y): time in
+        [0, 1] across the shutter (motion(time) gives the vertices and the
+        camera pose), lens on the unit disc."""
+        if sample == self.key:
+            return
+        self.key = sample
+        u, lx, ly = sample
+        self.times_seen.add(u)
+        self.lens_seen.add((lx, ly))
+        if self.motion is not None:
+            self.build(*self.motion(u))
+        self.cam = self.pinhole
+        if self.cfg.aperture_radius > 0 and (lx != 0.0 or ly != 0.0):
+            self.cam = thin_lens(self.pinhole, lx, ly, self.cfg.aperture_radius, focus_of(self.pose, self.cfg))
+
+
+def focus_of(pose, cfg) -> float:
+    """The focus distance along the view axis: the scene's, or the eye's
+    distance to the point it looks at."""
+    if cfg.focus_distance > 0:
+        return cfg.focus_distance
+    return float(np.linalg.norm(np.subtract(pose.look_at, pose.eye, dtype=np.float64)))
+
+
 def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: RenderConfig,
                  buffers: FrameBuffers = None, scene_grid: SceneGrid = None,
-                 camera_accel=None, shadow_accel=None) -> FrameResult:
+                 camera_accel=None, shadow_accel=None, motion=None) -> FrameResult:
     """Render one frame. Pass the same `buffers` and `scene_grid` for
     consecutive frames to reuse work arrays, image memory and static geometry;
     the returned images then belong to the buffers' ring (see FrameBuffers),
@@ -128,6 +193,11 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     surface once (surface.py), trace each light's shadow rays in light-space
     packets (shadow_rays.py) through cfg.shadow_accel, shade the samples,
     scatter them into the image.
+
+    motion: under motion blur, u -> (vertices, CameraPose) at shutter
+    position u in [0, 1] (geom and pose are those of the frame's own time);
+    each pass then takes its own time (shutter_lens.py). None: nothing moves
+    within the frame.
 
     camera_accel, shadow_accel: objects with the accelerators' methods used
     for the camera or shadow rays instead of building cfg.accel or the
@@ -140,7 +210,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "shadow_rays_skipped": 0, "lights_skipped": 0,
                 "tri_tests": 0, "cells": 0, "fallback_rays": 0,
-                "primary_packets": 0, "primary_visits": 0, "primary_tests": 0}
+                "primary_packets": 0, "primary_visits": 0, "primary_tests": 0, "builds": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
     lit = [li for li in range(n_lights) if not _light_is_dark(shading.lights[li])]
@@ -148,24 +218,17 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     cast_shadows = cfg.shadows and len(lit) > 0 and geom.faces.shape[0] > 0
     # the structures are chosen here, once: everything below goes through
     # their common surface (accelerators.py)
-    t0 = time.perf_counter()
     shadow_name = cfg.shadow_accel or SHADOW_ACCEL
     names = (({shadow_name} if cast_shadows and shadow_accel is None else set())
              | ({cfg.accel} if camera_accel is None else set()))
-    tri_verts, built = build_structures(names, geom, cfg, scene_grid, buffers, counters)
-    accel = built[cfg.accel] if camera_accel is None else camera_accel
-    shadow_accel = built.get(shadow_name) if shadow_accel is None else shadow_accel
-    timings["build_ms"] = (time.perf_counter() - t0) * 1e3
+    scene = PassScene(names, geom, pose, cfg, scene_grid, buffers, counters, timings, motion,
+                      camera_accel, shadow_accel)
 
-    t0 = time.perf_counter()
-    normals = scene_grid.normals_now()
-    timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
-
-    cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, W, H)
     bg = np.asarray(cfg.background, np.float32)
     # under an error budget the image starts from the pixel centres, and spp
     # is the most samples a pixel may get (adaptive.py)
     offsets = sample_offsets(1 if cfg.max_error > 0 else cfg.spp)
+    times_lens = plain_times_lens(len(offsets))
     single = len(offsets) == 1
     # one sample: the pass writes the image; several: each adds 1/spp of its own
     rgba, z = buffers.image()
@@ -192,7 +255,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             def trace(li, skip=None):
                 rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
                                  buffers.work, skip)
-                c = shadow_accel.trace_shadows(rays, vis[li])
+                c = scene.shadow_accel.trace_shadows(rays, vis[li])
                 counters["shadow_rays"] += rays.n_active
                 counters["shadow_rays_skipped"] += n_vis - rays.n_active
                 counters["tri_tests"] += c.tests
@@ -225,15 +288,16 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     def gather(jitter, t, prim, b1, b2, layout):
         """The visible surface of one pass of camera hits (timed as shading)."""
         t0 = time.perf_counter()
-        surface = visible_surface(cam, jitter, t, prim, b1, b2, *layout, tri_verts, geom.faces, normals,
-                                  geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
+        surface = visible_surface(scene.cam, jitter, t, prim, b1, b2, *layout, scene.tri_verts, geom.faces,
+                                  scene.normals, geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
                                   shading.tex_info, buffers.work)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
         return surface
 
-    for jitter in offsets:
+    for jitter, sample in zip(offsets, times_lens):
+        scene.move_to(sample)
         t0 = time.perf_counter()
-        hits, layout = accel.trace_camera(cam, W, H, jitter)
+        hits, layout = scene.accel.trace_camera(scene.cam, W, H, jitter)
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         c = hits.counters
         count_camera_rays(W * H, c)
@@ -250,11 +314,14 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
     samples = None
     if cfg.max_error > 0 and single:
-        samples = refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays,
+        samples = refine_pixels(rgba, z, cfg, scene, buffers, gather, shade_surface, count_camera_rays,
                                 timings, aovs)
         counters["adaptive_spp_mean"] = float(samples.mean())
         counters["spp_cap"] = adaptive_cap(cfg)
         counters["rays_left_out"] = adaptive_cap(cfg) * W * H - counters["rays"]
+    if motion is not None or cfg.aperture_radius > 0:
+        counters["time_samples"] = len(scene.times_seen) if motion is not None else 1
+        counters["lens_samples"] = len(scene.lens_seen) if cfg.aperture_radius > 0 else 1
     return FrameResult(rgba.reshape(H, W, 4), z.reshape(H, W), aovs.channels(H, W) if aovs else {},
                        timings, counters, samples)
 
@@ -291,7 +358,7 @@ def adaptive_cap(cfg: RenderConfig) -> int:
     return cfg.spp if cfg.spp > 1 else ADAPTIVE_SPP_CAP
 
 
-def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, count_camera_rays, timings, aovs):
+def refine_pixels(rgba, z, cfg, scene, buffers, gather, shade_surface, count_camera_rays, timings, aovs):
     """The error budget (adaptive.py) over the 1-spp image. A group of passes
     (sample offsets) traces one camera ray per active pixel and offset as
     one ray batch (pixels in adaptive.py's block order, a pixel's rays side
@@ -302,6 +369,8 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
     camera rays and took longer (hand, 256^2, E = 0.02: 171 against 117 ms
     of tracing, pass by pass); shadowing pass by pass took 5x longer (369
     against 76 ms): small scattered sets make loose light-space packets.
+    Under motion blur or a thin lens every offset has a time and lens
+    position of its own (PassScene), so each is traced and shaded alone.
     Returns the samples per pixel."""
     W, H = cfg.width, cfg.height
     n_pix = W * H
@@ -311,18 +380,18 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
     full_prim = buffers.work.take("adaptive.prim", (n_pix,), np.int32)
     full_prim.fill(-1)
     layout = row_major_offsets(W, H)
-    eye = np.asarray(cam[:3], np.float32)
+    centre = plain_times_lens(1)[0]             # the 1-spp image's time and lens (the border ring's too)
 
-    def trace_passes(pixels, offsets, aov=True):
+    def trace_group(pixels, offsets, aov):
         # every offset's camera rays in one batch, pixel-major (a pixel's rays
         # side by side), so that a packet spans as few pixels as it can
         t0 = time.perf_counter()
-        m, g = pixels.shape[0], len(offsets)
+        cam, m, g = scene.cam, pixels.shape[0], len(offsets)
         dirs = np.empty((g, m, 3), np.float32)
         for j, (ox, oy) in enumerate(offsets):
             camera_rays_of(cam, pixels, W, np.float32(ox), np.float32(oy), dirs[j])
-        hits = accel.trace_rays(np.broadcast_to(eye, (m * g, 3)),
-                                np.ascontiguousarray(dirs.transpose(1, 0, 2)).reshape(-1, 3))
+        hits = scene.accel.trace_rays(np.broadcast_to(np.asarray(cam[:3], np.float32), (m * g, 3)),
+                                      np.ascontiguousarray(dirs.transpose(1, 0, 2)).reshape(-1, 3))
         timings["trace_ms"] += (time.perf_counter() - t0) * 1e3
         count_camera_rays(m * g, hits.counters)
         surfaces = []
@@ -347,8 +416,22 @@ def refine_pixels(rgba, z, cfg, cam, accel, buffers, gather, shade_surface, coun
             k += n_hit
         return out
 
+    def trace_passes(pixels, offsets, aov=True):
+        out, i = [], 0
+        while i < len(offsets):
+            # the run of offsets that share a time and lens position
+            sample = tuple(offsets[i][2:]) or centre
+            end = i + 1
+            while end < len(offsets) and (tuple(offsets[end][2:]) or centre) == sample:
+                end += 1
+            scene.move_to(sample)
+            out += trace_group(pixels, [o[:2] for o in offsets[i:end]], aov)
+            i = end
+        return out
+
+    moving = scene.motion is not None or cfg.aperture_radius > 0
     samples, _ = refine(rgba, z, W, H, np.asarray(cfg.background, np.float32), cfg.max_error,
-                        adaptive_cap(cfg), trace_passes)
+                        adaptive_cap(cfg), trace_passes, budget_times_lens(adaptive_cap(cfg)) if moving else None)
     return samples
 
 

@@ -148,7 +148,7 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
                     view[0, i] = dx
                     view[1, i] = dy
                     view[2, i] = dz
-                    depth[i] = hit_t[k] * (dx * cam[3] + dy * cam[4] + dz * cam[5])
+                    depth[i] = hit_t[k] * (dx * cam[16] + dy * cam[17] + dz * cam[18])
                     # point and unit geometric normal, turned to the viewer; the
                     # largest vertex coordinate scales the point's float32 error
                     px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)

@@ -39,7 +39,17 @@ class SceneRenderer:
         pose = CameraPose(*scene.camera_at(t))
         interp_ms = (time.perf_counter() - t0) * 1e3
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
-        return interp_ms, render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid)
+        motion = self.shutter(t)
+        result = render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid, motion=motion)
+        return interp_ms + (motion.interp_ms if motion else 0.0), result
+
+    def shutter(self, t):
+        """The frame's motion within its shutter (None without motion blur,
+        or when nothing in the scene moves: no object, no camera)."""
+        cfg = self.cfg
+        if cfg.shutter <= 0 or (not self.scene.moving and self.scene.spec.camera.keys is None):
+            return None
+        return Shutter(self.scene, t, cfg.shutter / self.scene.spec.frames.fps, cfg.shutter_position)
 
     def trace_camera_only(self, t):
         """Interpolate, build the structures (the camera rays' and the shadow
@@ -54,6 +64,28 @@ class SceneRenderer:
         pose = CameraPose(*self.scene.camera_at(t))
         cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, self.cfg.width, self.cfg.height)
         built[self.cfg.accel].trace_camera(cam, self.cfg.width, self.cfg.height, (0.5, 0.5))
+
+
+class Shutter:
+    """u in [0, 1] across the shutter -> (vertices, CameraPose) at that
+    time: the shutter is open for `length` seconds, centred on the frame
+    time t, opening at it (start), or closing at it (end). Interpolation
+    time is summed in interp_ms."""
+    OPENS = {"center": -0.5, "start": 0.0, "end": -1.0}
+
+    def __init__(self, scene, t, length, position):
+        self.scene, self.interp_ms = scene, 0.0
+        self.t, self.opens, self.length = t, self.OPENS[position], length
+
+    def time_of(self, u):
+        return self.t + (self.opens + u) * self.length     # exactly t at u = 1/2 when centred
+
+    def __call__(self, u):
+        t0 = time.perf_counter()
+        t = self.time_of(u)
+        out = self.scene.vertices_at(t), CameraPose(*self.scene.camera_at(t))
+        self.interp_ms += (time.perf_counter() - t0) * 1e3
+        return out
 
 
 def warm_up(scene, shading, cfg, t):

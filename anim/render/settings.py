@@ -16,7 +16,9 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
                 accel=spec.render.accel, shadow_accel=spec.render.shadow_accel or "", grid_density=spec.render.grid_density,
                 light_probes=spec.render.light_probes, max_error=spec.render.max_error,
                 background=tuple(spec.render.background), ambient=spec.render.ambient,
-                aovs=tuple(spec.output.aovs))
+                aovs=tuple(spec.output.aovs), shutter=spec.render.motion_blur.shutter,
+                shutter_position=spec.render.motion_blur.position,
+                aperture_radius=spec.camera.aperture_radius, focus_distance=spec.camera.focus_distance or 0.0)
     base.update({k: v for k, v in overrides.items() if v is not None})
     return RenderConfig(**base)
 

@@ -111,6 +111,12 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             **({"spp_cap": result.counters["spp_cap"],
                 "rays_left_out": result.counters["rays_left_out"],
                 "spp_mean": result.counters["adaptive_spp_mean"]} if "rays_left_out" in result.counters else {}),
+            # under motion blur or a thin lens: the shutter times and lens positions
+            # the passes took, and how often (and how long) the structures were built
+            **({"time_samples": result.counters["time_samples"], "lens_samples": result.counters["lens_samples"],
+                "builds": result.counters["builds"],
+                "build_ms_per_build": tm["build_ms"] / max(result.counters["builds"], 1)}
+               if "time_samples" in result.counters else {}),
             # RGB values that half floats cannot hold (they are written as +inf)
             **({"half_overflow": n_over} if (n_over := half_overflow(result.rgba)) else {}),
             "mrays_per_s": rays / max(tm["trace_ms"], 1e-9) / 1e3}
