@@ -154,7 +154,8 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes, tim
     not the pixel's (the border ring, offsets outside [0, 1]), kept out of
     the AOVs. times_lens: (time, lens_x, lens_y) of each budget offset
     (shutter_lens.budget_times_lens) under motion blur or a thin lens; the
-    offsets handed to trace_passes are then (jx, jy, time, lens_x, lens_y).
+    offsets handed to trace_passes are then (jx, jy, time, lens_x, lens_y),
+    and every pixel takes the first nested round, whatever its contrast.
 
     Returns (samples per pixel (H*W,) int32, error estimate (H*W,) f32):
     the estimate a pixel stopped at (1 spp: the neighbour contrast)."""
@@ -166,7 +167,9 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes, tim
     neighbour_contrast(padded, width + 2, height + 2, contrast)
     estimate = np.ascontiguousarray(contrast.reshape(height + 2, width + 2)[1:-1, 1:-1]).reshape(-1)
     contrast = estimate.copy()
-    active = np.flatnonzero(estimate > max_error).astype(np.int64)
+    # under motion blur or a thin lens one sample says nothing of what the
+    # shutter or the lens spreads over a pixel: every pixel takes the first round
+    active = np.flatnonzero((estimate > max_error) | (times_lens is not None)).astype(np.int64)
     if cap <= 1 or active.size == 0:
         return samples, estimate
     active = block_order(active, width)
@@ -206,6 +209,16 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes, tim
             i = end
         done = total
         samples[pixels] = done
+        if times_lens is not None and total == totals[0]:
+            # every pixel now holds the first round's times and lens points:
+            # the contrast of their means shows what the 1-spp image could
+            # not (an edge that covers a pixel for the first 5 % of the
+            # shutter, which all of its own samples missed), and it counts
+            # as the contrast of `done` samples
+            padded.reshape(height + 2, width + 2, 4)[1 + active // width, 1 + active % width] = sums / done
+            after = np.empty((height + 2) * (width + 2), np.float32)
+            neighbour_contrast(padded, width + 2, height + 2, after)
+            contrast = np.maximum(contrast, after.reshape(height + 2, width + 2)[1:-1, 1:-1].reshape(-1) * done)
         err = np.maximum(half_difference(half, sums[live], half_at, done - half_at),
                          contrast[pixels] / done)
         estimate[pixels] = err

@@ -5,14 +5,23 @@ A frame of `spp` passes is an accumulation buffer (Haeberli and Akeley
 1990): each pass is one image at one time and one lens position, so its
 camera rays keep one origin and stay frustum packets, and its structures
 are those of that time. The passes' times, lens positions and pixel
-offsets cover the three domains together, as the jittered patterns of
-distributed ray tracing (Cook, Porter and Carpenter 1984) do:
+offsets cover the domains together, as the patterns of distributed ray
+tracing (Cook, Porter and Carpenter 1984) do:
 
-- plain `--spp n`: each of time, lens x and lens y takes every one of its
-  n strata exactly once, in an order of its own (N-rooks, Shirley 1991):
-  a step in time (an edge passing a pixel) is then integrated with an
-  error of at most 1/n, and the dimensions do not align with each other or
-  with the pixel offsets;
+- plain `--spp n`: pass i's pixel offset is Hammersley point i
+  (sampling.sample_offsets: x = (i + 1/2) / n, y = radical inverse base 2);
+  its time and lens position are the radical inverses of i in bases 3, 5
+  and 7 (base 7's digits scrambled), each replaced by its rank among the n passes: every one of the n
+  time strata (and lens-x, lens-y strata) is taken exactly once (a pixel
+  centre that an edge covers for a share s of the shutter gets s within
+  1/n), while every pair of dimensions keeps the Hammersley and Halton
+  sets' even spread in the plane. (A Hammersley set of the lens's own, in
+  a lattice order, correlated its y with the pixel's y at 0.93 for 256
+  passes and shrank the depth of field's blur by 7 %.) A moving edge is a step in pixel position and time together: a
+  set spread in both converges there as about n^-3/4 (stratified sampling
+  of an edge, Mitchell 1996), against n^-1/2 for Latin-hypercube orders
+  that are random between the dimensions (measured: slope -0.75 against
+  -0.56, tests/test_motion_blur.py);
 - the error budget's nested samples (sampling.sample_offset): the shutter
   time from the radical inverse in base 3 and the lens from bases 5 and 7,
   each shifted by 1/2, so that sample 0 (the 1-spp image) sits at the
@@ -26,8 +35,10 @@ import numpy as np
 
 from .sampling import nested_before_cap
 
-# the N-rooks orders come from this seed: frames are the same on every run and machine
-ORDER_SEED = 20061984
+# base 7's digits d taken as 4 d mod 7: the plain radical inverses in bases 5
+# and 7 rise together for the first 5 passes (4 passes: all on one diagonal
+# of the lens); scrambled, 5 passes fall on the lens like a lattice
+LENS_Y_SCRAMBLE = 4
 
 
 def concentric_disc(a, b):
@@ -43,14 +54,21 @@ def concentric_disc(a, b):
     return r * np.cos(phi), r * np.sin(phi)
 
 
-def radical_inverse(i: int, base: int) -> float:
-    """i's digits in `base` mirrored about the point: 0, 1/b, 2/b, ..., 1/b^2, ..."""
+def radical_inverse(i: int, base: int, scramble: int = 1) -> float:
+    """i's digits in `base` mirrored about the point: 0, 1/b, 2/b, ..., 1/b^2, ...;
+    each digit d taken as (scramble d) mod base (a permutation when scramble
+    and base are coprime)."""
     f, inv = 0.0, 1.0 / base
     while i:
-        f += inv * (i % base)
+        f += inv * (scramble * (i % base) % base)
         i //= base
         inv /= base
     return f
+
+
+def ranks(values) -> np.ndarray:
+    """Each value's place (0 ... n - 1) in the sorted values."""
+    return np.argsort(np.argsort(values, kind="stable"), kind="stable")
 
 
 def plain_times_lens(n: int) -> list:
@@ -59,9 +77,9 @@ def plain_times_lens(n: int) -> list:
     shutter's middle and the lens centre."""
     if n <= 1:
         return [(0.5, 0.0, 0.0)]
-    rng = np.random.default_rng(ORDER_SEED + n)
-    strata = [(rng.permutation(n) + 0.5) / n for _ in range(3)]
-    return [(float(t), *concentric_disc(float(a), float(b))) for t, a, b in zip(*strata)]
+    time, lens_a, lens_b = ((ranks([radical_inverse(i, base, scramble) for i in range(n)]) + 0.5) / n
+                            for base, scramble in ((3, 1), (5, 1), (7, LENS_Y_SCRAMBLE)))
+    return [(float(t), *concentric_disc(float(a), float(b))) for t, a, b in zip(time, lens_a, lens_b)]
 
 
 def nested_time_lens(i: int) -> tuple:
