@@ -41,12 +41,13 @@ def print_report(report):
     console.print(table)
     image = report.get("image")
     if image:
-        for study, knob in (("spp", "spp"), ("light_samples", "light_samples")):
-            ref = image["ref_spp"] if knob == "spp" else image["ref_light_samples"]
-            for name, rows in image[study].items():
-                table = Table(title=f"{name}: image error vs {knob.replace('_', ' ')} ({image['resolution']}², "
+        for study, knob in (("spp", "spp"), ("light_samples", "light_samples"), ("motion_blur", "spp")):
+            ref = image["ref_light_samples"] if knob == "light_samples" else image["ref_spp"]
+            for name, rows in image.get(study, {}).items():
+                what = "passes, each at its own shutter time" if study == "motion_blur" else knob.replace("_", " ")
+                table = Table(title=f"{name}: image error vs {what} ({image['resolution']}², "
                                     f"against {ref}; slope of log RMSE vs log ms "
-                                    f"{image['slopes'][f'{name} ' + knob.replace('_', ' ')]:.2f})")
+                                    f"{image['slopes'][f'{name} ' + study.replace('_', ' ')]:.2f})")
                 for col in (knob, "ms/frame", "rays", "RMSE", "max", "PSNR dB"):
                     table.add_column(col, justify="right")
                 for r in rows:
@@ -114,7 +115,7 @@ def write_report(report, plot_path: Path, json_path: Path):
     axes[2].legend(fontsize=7)
     image = report.get("image") or {}
     for study, knob, style in (("spp", "spp", "o-"), ("budget", "budget", "s--"),
-                               ("light_samples", "light samples", "^:")):
+                               ("light_samples", "light samples", "^:"), ("motion_blur", "motion blur", "d-.")):
         for name, rows in image.get(study, {}).items():
             key = f"{name} {knob}"
             axes[3].loglog([r["ms"] for r in rows], [r["rmse"] for r in rows], style,

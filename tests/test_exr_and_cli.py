@@ -136,6 +136,10 @@ def test_bench_error_reports_orders_and_writes_json_and_plot(tmp_path):
     assert [r["spp"] for r in spp] == [1, 4, 16] and report["quick"]
     assert spp[-1]["rmse"] < 0.5 * spp[0]["rmse"] and report["image"]["slopes"]["torus spp"] < -0.2
     assert "image error vs spp" in res.output
+    # motion blur: passes, each at its own shutter time, converge to the many-pass frame
+    blur = report["image"]["motion_blur"]["torus (shutter 0.5)"]
+    assert [r["spp"] for r in blur] == [1, 4, 16] and blur[-1]["rmse"] < 0.5 * blur[0]["rmse"]
+    assert "torus (shutter 0.5): image error vs passes" in res.output
     # float32 precision: scale-free when the scene sits at the origin, breaking up far from it
     rows = {(r["scale"], r["offset"]): r for r in report["precision"]["rows"]}
     assert all(rows[s, 0.0]["median_rel"] < 1e-6 and rows[s, 0.0]["hit_mismatch"] == 0 for s in (1e-4, 1.0, 1e4))

@@ -6,7 +6,9 @@ time, for the knobs that trade one for the other.
   MAX_ERRORS, with the rays uniform sampling needs for the same RMSE;
 * area-light samples 1..64 (emitters, each one more shadow pass), on the
   scene with its first point light made a 1x1 area light, against
-  REF_LIGHT_SAMPLES emitters.
+  REF_LIGHT_SAMPLES emitters;
+* motion blur (a shutter of MOTION_SHUTTER frame intervals): passes 1..64,
+  each at its own shutter time, against REF_SPP passes, on the first scene.
 
 Error is over the linear RGB of the whole frame: RMSE, max, and PSNR with a
 peak of 1. The measured slope of log RMSE against log ms per frame goes
@@ -35,6 +37,7 @@ MAX_ERRORS = (0.04, 0.02, 0.01, 0.005, 0.0025)
 AREA_SAMPLES = 16
 AREA_PROBES = 4
 RES = 192
+MOTION_SHUTTER = 0.5           # the film "180 degree" shutter
 EXPECTED_SLOPES = {"random": -0.5, "stratified at edges": -0.75}
 
 
@@ -75,6 +78,17 @@ QUICK = {"spps": (1, 4, 16), "ref_spp": 64, "light_samples": (1, 4, 16), "ref_li
          "max_errors": (0.04, 0.01)}
 FULL = {"spps": SPPS, "ref_spp": REF_SPP, "light_samples": LIGHT_SAMPLES, "ref_light_samples": REF_LIGHT_SAMPLES,
         "max_errors": MAX_ERRORS}
+
+
+def motion_blur_study(scene, t, res=RES, sizes=FULL):
+    """Rows of passes (spp) under a MOTION_SHUTTER shutter, against the
+    frame of ref_spp passes."""
+    ref = _frame(scene, t, res, repeats=1, spp=sizes["ref_spp"], shutter=MOTION_SHUTTER)[0]
+    rows = []
+    for spp in sizes["spps"]:
+        rgb, ms, rays = _frame(scene, t, res, spp=spp, shutter=MOTION_SHUTTER)
+        rows.append({"spp": spp, "ms": ms, "rays": rays, **_error(rgb, ref)})
+    return rows
 
 
 def spp_study(scene, t, res=RES, sizes=FULL):
@@ -147,7 +161,8 @@ def run_image_study(names, res=RES, sizes=FULL):
     light samples 1..64, then spp and the error budget with AREA_SAMPLES
     emitters, AREA_PROBES of them probes."""
     out = {"resolution": res, "ref_spp": sizes["ref_spp"], "ref_light_samples": sizes["ref_light_samples"],
-           "expected_slopes": EXPECTED_SLOPES, "spp": {}, "budget": {}, "light_samples": {}, "slopes": {}}
+           "expected_slopes": EXPECTED_SLOPES, "spp": {}, "budget": {}, "light_samples": {}, "motion_blur": {},
+           "slopes": {}}
 
     def pixel_studies(label, scene, t):
         out["spp"][label], out["budget"][label] = spp_study(scene, t, res, sizes)
@@ -161,6 +176,10 @@ def run_image_study(names, res=RES, sizes=FULL):
             scene = AnimatedScene(builtin.get(name).write(Path(tmp) / name))
             t = scene.time_of(scene.frame_numbers[len(scene.frame_numbers) // 3])
             pixel_studies(name, scene, t)
+            if not out["motion_blur"]:
+                label = f"{name} (shutter {MOTION_SHUTTER:g})"
+                out["motion_blur"][label] = motion_blur_study(scene, t, res, sizes)
+                out["slopes"][f"{label} motion blur"] = slope(out["motion_blur"][label])
             if not out["light_samples"]:
                 index = area_lit(scene)
                 if index is not None:
