@@ -153,7 +153,7 @@ def _accel_list(text, hint):
 def _finite(value, hint):
     """value, unless it is NaN (which every range check lets through)."""
     if value is not None and value != value:
-        raise click.BadParameter("must be a number from 0 to 1, got nan", param_hint=hint)
+        raise click.BadParameter("must be a number, got nan", param_hint=hint)
     return value
 
 
@@ -207,6 +207,9 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
               help="Error budget per pixel in linear RGBA (default: render.max_error, 0 = off): start at the "
                    "pixel centre and give more samples, up to --spp (64 when spp is 1), only to pixels "
                    "whose estimated error is above E.")
+@click.option("--shutter", type=click.FloatRange(0, 1000), metavar="S", callback=lambda ctx, param, v: _finite(v, "--shutter"),
+              help="Motion blur: the shutter is open S frame intervals (default: render.motion_blur.shutter, "
+                   "0 = off; 0.5 = a 180-degree shutter). Each of the --spp passes takes one time in it.")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames); merged with an earlier run's by frame number.")
 @click.option("--resume", is_flag=True, help="Skip frames already written whole (a truncated or foreign file is rendered again); "
                                             "--resume renders into one directory share the frames.")
@@ -231,7 +234,7 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
 def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet, threads, no_shadows, spp, max_error,
-           stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
+           shutter, stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
            tls_ca, tls_cert, tls_key):
     """Render ANIM_YAML (a scene file, or a USD stage: .usd, .usda, .usdc,
     .usdz) to one OpenEXR file per frame, plus stats.json."""
@@ -272,7 +275,7 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
         click.echo(f"frustrace: warning: --packet is for the grid; the {name} traces {side}x{side} packets", err=True)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
-                    width=width, height=height)
+                    width=width, height=height, shutter=shutter)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"

@@ -159,7 +159,10 @@ def settings_of(cfg: RenderConfig) -> dict:
     return {"accel": cfg.accel, "shadow_accel": cfg.shadow_accel or SHADOW_ACCEL,
             "packet": packet_of(cfg.accel, cfg.packet),
             "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
-            **({"max_error": cfg.max_error} if cfg.max_error > 0 else {})}
+            **({"max_error": cfg.max_error} if cfg.max_error > 0 else {}),
+            **({"shutter": cfg.shutter, "shutter_position": cfg.shutter_position} if cfg.shutter > 0 else {}),
+            **({"aperture_radius": cfg.aperture_radius, "focus_distance": cfg.focus_distance or None}
+               if cfg.aperture_radius > 0 else {})}
 
 
 PHASE_KEYS = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms", "write_ms")
