@@ -70,6 +70,12 @@ def test_the_sample_patterns_are_stratified_in_time_and_on_the_lens():
         assert sorted(np.floor(tl[:, 0] * n).astype(int)) == list(range(n))
         assert np.all(np.hypot(tl[:, 1], tl[:, 2]) <= 1 + 1e-12)
     assert plain_times_lens(1) == [(0.5, 0.0, 0.0)]
+    # at a pixel centre an edge covering it for the share s of the shutter
+    # (from time 1 - s on) is seen by a share of the passes within 1/n of s
+    for n in (3, 16, 100):
+        times = np.array(plain_times_lens(n))[:, 0]
+        for share in np.linspace(0, 1, 997):
+            assert abs(np.mean(times >= 1 - share) - share) <= 1 / n + 1e-12
     # nested samples: the first is the shutter's middle and the lens centre (the 1-spp image)
     tl = budget_times_lens(64)
     assert tl[0] == (0.5, 0.0, 0.0) and len(tl) == 15 + 64
