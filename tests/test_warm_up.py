@@ -13,9 +13,9 @@ ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "anim" / "builtin" / "demo" / "anim.yaml"
 
 
-@pytest.mark.parametrize("overrides", ["{}", "dict(spp=4, accel='bvh', aovs=('N', 'P', 'id'))",
+@pytest.mark.parametrize("overrides", ["{}",
                                        # every pass at its own time and lens point
-                                       "dict(spp=4, shutter=0.5, aperture_radius=0.02)",
+                                       "dict(spp=4, accel='bvh', aovs=('N', 'P', 'id'), shutter=0.5, aperture_radius=0.02)",
                                        # 0.05: few pixels stay above the budget, so a group
                                        # of passes shades several passes' samples at once
                                        "dict(max_error=0.05, accel='kdtree')"])
