@@ -27,9 +27,12 @@ KILLS = int(os.environ.get("FRUSTRACE_KILLS", "20"))
 
 
 def frustrace(*args, **kw):
-    """Start frustrace in a new process (the way a user or a farm runs it)."""
+    """Start frustrace in a new process (the way a user or a farm runs it),
+    with Ctrl-C at its default: a test suite started in the background of a
+    shell inherits SIGINT ignored, and Python then leaves it ignored."""
     return subprocess.Popen([sys.executable, "-m", "cli.main", *map(str, args)], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
 
 
 def exr_frames(d: Path):
