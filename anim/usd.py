@@ -478,6 +478,38 @@ def _camera_at(prim, time, pxr):
     return eye, eye + forward, up, min(max(fov, 1e-3), 179.0), cam.horizontalAperture / cam.verticalAperture
 
 
+def _lens_and_shutter(prim, time, pxr, notes) -> tuple:
+    """({aperture_radius, focus_distance} or {}, {shutter, position} or {})
+    of a UsdGeomCamera. The lens: fStop > 0 gives a thin lens of diameter
+    focalLength / fStop (focalLength is in tenths of a scene unit, as the
+    apertures), focused at focusDistance (scene units); both at the first
+    frame. The shutter: shutter:open and shutter:close are offsets from the
+    frame time in frames, which render.motion_blur takes when the shutter
+    opens at it, closes at it, or is centred on it."""
+    usd_cam = pxr.UsdGeom.Camera(prim)
+    cam = usd_cam.GetCamera(time)
+    lens, blur = {}, {}
+    if cam.fStop > 0 and cam.focusDistance > 0:
+        radius = cam.focalLength * pxr.Gf.Camera.FOCAL_LENGTH_UNIT / (2 * cam.fStop)
+        lens = {"aperture_radius": radius, "focus_distance": float(cam.focusDistance)}
+        notes.append(f"depth of field from the camera: f/{cam.fStop:g}, focal length {cam.focalLength:g}, "
+                     f"focused at {cam.focusDistance:g}: lens radius {radius:.4g} (seen with spp > 1)")
+    elif cam.fStop > 0:
+        notes.append(f"the camera's fStop {cam.fStop:g} has no focusDistance: rendered as a pinhole")
+    open_, close = usd_cam.GetShutterOpenAttr().Get(time), usd_cam.GetShutterCloseAttr().Get(time)
+    if open_ is not None and close is not None and close > open_:
+        position = ("start" if open_ == 0 else "end" if close == 0 else
+                    "center" if math.isclose(open_, -close) else None)
+        if position is None:
+            notes.append(f"shutter {open_:g}..{close:g} frames is not opened, closed or centred at the frame "
+                         "time: taken as centred")
+            position = "center"
+        blur = {"shutter": float(close - open_), "position": position}
+        notes.append(f"motion blur from the camera: shutter {open_:g}..{close:g} frames ({position}; seen with "
+                     "spp > 1)")
+    return lens, blur
+
+
 def scene_of_stage(path, camera=None):
     """A scene file's data (anim/schema.py) for a whole USD stage, and notes
     on what came from the stage and what from frustrace's defaults."""
@@ -519,7 +551,10 @@ def scene_of_stage(path, camera=None):
         cam = ({k: keys[0][k] for k in ("eye", "look_at", "up", "fov")} if still
                else {"keys": keys, "interpolation": "linear"})
         notes.append(f"camera {cam_prim.GetPath()} (vertical field of view {keys[0]['fov']:.2f} degrees)")
+        lens, blur = _lens_and_shutter(cam_prim, time0, pxr, notes)
+        cam.update(lens)
     else:
+        blur = {}
         cam, height = _default_camera(stage, time0, pxr), width
         notes.append("no camera in the stage: frustrace's default view of the bounds at the first frame")
     lights = _lights(stage, time0, pxr, notes)
@@ -534,7 +569,8 @@ def scene_of_stage(path, camera=None):
         lights = [{"type": "point", "position": _vec(eye), "intensity": d2}]
         notes.append("no lights in the stage: a point light at the camera, as USD viewers do")
     data = {"version": 1, "frames": {"start": start, "end": end, "fps": float(fps)},
-            "output": {"resolution": [width, height]}, "camera": cam, "lights": lights, "objects": objects}
+            "output": {"resolution": [width, height]}, "camera": cam, "lights": lights, "objects": objects,
+            **({"render": {"motion_blur": blur}} if blur else {})}
     return data, notes
 
 

@@ -3,6 +3,7 @@ against usd-core's own baked evaluation (UsdSkel.BakeSkinning, a separate
 code path from the queries frustrace uses), time-sampled points and
 transforms against numpy, a whole stage rendered with its own camera and
 lights, and bad stages as one-line errors."""
+import json
 import math
 import shutil
 
@@ -274,3 +275,32 @@ def test_an_orthographic_camera_is_refused_in_one_line(tmp_path):
     stage.GetRootLayer().Save()
     out = _check_line(tmp_path / "shot.usda")
     assert "/World/Cam" in out and "orthographic" in out
+
+
+def test_the_cameras_lens_and_shutter_become_depth_of_field_and_motion_blur(tmp_path):
+    """fStop and focusDistance make the thin lens (diameter focalLength /
+    fStop, focalLength in tenths of a unit); shutter:open/close (frames
+    around the frame time) the shutter; unauthored, a pinhole and none."""
+    shot(tmp_path / "shot.usda")
+    plain = AnimatedScene(tmp_path / "shot.usda").spec
+    assert plain.camera.aperture_radius == 0 and plain.render.motion_blur.shutter == 0
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    cam.CreateFStopAttr(2.5)
+    cam.CreateFocusDistanceAttr(6.0)
+    cam.CreateShutterOpenAttr(-0.25)
+    cam.CreateShutterCloseAttr(0.25)
+    stage.Save()
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "shot.usda")])
+    assert res.exit_code == 0, res.output
+    assert "depth of field from the camera: f/2.5" in res.output and "shutter -0.25..0.25 frames" in res.output
+    spec = AnimatedScene(tmp_path / "shot.usda").spec
+    assert spec.camera.aperture_radius == pytest.approx(50 * 0.1 / (2 * 2.5))
+    assert spec.camera.focus_distance == 6.0
+    assert (spec.render.motion_blur.shutter, spec.render.motion_blur.position) == (0.5, "center")
+    out = tmp_path / "frames"
+    res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(out), "--res", "32x24",
+                                    "--spp", "4", "--frames", "1:1", "--quiet"])
+    assert res.exit_code == 0, res.output
+    frame = json.loads((out / "stats.json").read_text())["frames"][0]
+    assert frame["time_samples"] == 4 and frame["lens_samples"] == 4
