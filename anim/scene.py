@@ -169,6 +169,29 @@ class SceneObject:
                        and (self.file is None or self.file.static)
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
 
+    def moving_curves(self):
+        """The keyed curves that move this object (each with times,
+        extrapolate), or None when a glTF or USD file moves it by its own
+        animation."""
+        if self.file is not None and not self.file.static:
+            return None
+        curves = [self.curve, self.translation, self.rotation, self.scale]
+        if self.skeleton is not None:
+            curves += self.skeleton.rotation + self.skeleton.translation
+        curves = [getattr(c, "curve", c) for c in curves]          # a joint's AngleCurve holds a Curve
+        return [c for c in curves if c is not None and not c.constant]
+
+    def held_over(self, t0, t1) -> bool:
+        """Whether the object cannot move within [t0, t1]: static, or every
+        curve that moves it is clamped and the interval lies before its first
+        key or after its last. Conservative: a pause between equal keys, or
+        a file's own animation, counts as moving."""
+        if self.static:
+            return True
+        curves = self.moving_curves()
+        return curves is not None and all(c.extrapolate == "clamp" and (t1 <= c.times[0] or t0 >= c.times[-1])
+                                          for c in curves)
+
     def place(self, t, out):
         """Write the positions at time t into out (n_v, 3) f32."""
         if self.curve is not None:
@@ -429,12 +452,16 @@ class AnimatedScene:
     def time_of(self, frame):
         return frame / self.spec.frames.fps
 
-    def vertices_at(self, t):
-        """(n_v, 3) f32 positions at time t; only moving objects are recomputed."""
+    def vertices_at(self, t, held=()):
+        """(n_v, 3) f32 positions at time t; only moving objects are
+        recomputed, and of those placed one by one, not the ones in `held`
+        (objects held still over a shutter, already in place: see
+        held_over). The rigid ones are placed together in one kernel."""
         if self.rigid_batch is not None:
             self.rigid_batch.place(t, self.vertices)
         for obj in self.one_by_one:
-            obj.place(t, self.vertices[obj.offset:obj.offset + len(obj.base)])
+            if obj not in held:
+                obj.place(t, self.vertices[obj.offset:obj.offset + len(obj.base)])
         return self.vertices
 
     def camera_at(self, t):

@@ -229,3 +229,34 @@ objects: [{{name: quad, mesh: quad.obj}}]
     alpha = result.rgba[0, :, 3].astype(np.float64)
     assert np.abs(alpha - exact_alpha(0.5, -0.25, -SPEED)).max() < 0.03
     assert result.counters["builds"] == 1 and result.counters["time_samples"] == 64
+
+
+def test_an_object_held_still_within_the_shutter_is_not_placed_per_pass(tmp_path, monkeypatch):
+    """A tube whose vertex keys end at t = 1 (clamped) beside the moving
+    quad: at frame 2 the shutter spans 1.75..2.25 s, the tube cannot move
+    there, so it keeps the frame time's placement, and only the quad is
+    placed at each pass's time; its pixels are those of an unblurred frame."""
+    from anim.scene import SceneObject
+    from test_scene import DEMO
+    import shutil
+    for f in ("tube_000.obj", "tube_001.obj"):
+        shutil.copy(DEMO / f, tmp_path / f)
+    path = edge_scene(tmp_path, ", motion_blur: {shutter: 0.5}", spp=8)
+    text = path.read_text() + """  - name: tube
+    keyframes: [{t: 0, mesh: tube_000.obj}, {t: 1, mesh: tube_001.obj}]
+"""
+    path.write_text(text)
+    scene = AnimatedScene(path)
+    tube = scene.objects[1]
+    assert tube.held_over(1.75, 2.25) and not tube.held_over(0.75, 1.25)
+    assert not scene.objects[0].held_over(1.75, 2.25)
+    placed = []
+    original = SceneObject.place
+    monkeypatch.setattr(SceneObject, "place", lambda self, t, out: (placed.append((self.name, t)),
+                                                                    original(self, t, out)))
+    renderer = SceneRenderer(scene, config_of(scene), shading_of(scene))
+    renderer.render(scene.time_of(2))
+    assert placed == [("tube", 2.0)]                 # once, at the frame time, not per pass
+    placed.clear()
+    renderer.render(scene.time_of(1))                 # shutter 0.75..1.25: the tube's last key is inside
+    assert len(placed) == 1 + 8

@@ -76,6 +76,10 @@ class Shutter:
     def __init__(self, scene, t, length, position):
         self.scene, self.interp_ms = scene, 0.0
         self.t, self.opens, self.length = t, self.OPENS[position], length
+        # objects that cannot move within the shutter stay where the frame
+        # time put them (it lies in the shutter): not placed again per pass
+        t_open, t_close = self.time_of(0.0), self.time_of(1.0)
+        self.held = [o for o in scene.one_by_one if o.held_over(t_open, t_close)]
 
     def time_of(self, u):
         return self.t + (self.opens + u) * self.length     # exactly t at u = 1/2 when centred
@@ -83,7 +87,7 @@ class Shutter:
     def __call__(self, u):
         t0 = time.perf_counter()
         t = self.time_of(u)
-        out = self.scene.vertices_at(t), CameraPose(*self.scene.camera_at(t))
+        out = self.scene.vertices_at(t, self.held), CameraPose(*self.scene.camera_at(t))
         self.interp_ms += (time.perf_counter() - t0) * 1e3
         return out
 
