@@ -3,7 +3,7 @@ object, refit every frame, one tree for all static objects, built once, and
 a small top-level tree over their roots, built every frame.
 
 Keyframed meshes keep their topology, so each moving object's tree is built
-once and then refit (bvh_build.refit_regions): its boxes follow the
+once and then refit (bvh_build.refit): its boxes follow the
 vertices. Refitting keeps the tree's shape, which suits rigid and gently
 deforming motion; when an object's parts move apart, its boxes grow and
 overlap, so the SAH cost of every refit tree is compared with its cost at
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit, sah_cost
+from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit, refit_plan, sah_cost
 
 # a refit tree is rebuilt when its SAH cost exceeds this many times its cost
 # at the last build. The SAH cost is the expected work of a ray, so a tree
@@ -61,6 +61,8 @@ class SceneBvh:
         self.stats = {}
         self._moving_idx = np.array([g for g in range(n_groups) if self.moving[g]], np.int64)
         self.used = np.zeros(n_groups, np.int64)     # nodes each tree's build used
+        self.plans = [None] * n_groups               # each tree's refit_plan, made by its build
+        self._refit_args = None                      # the moving trees' plans joined, until a rebuild
 
     @classmethod
     def of_objects(cls, n_tris, object_ranges=None, moving_tris=None):
@@ -103,6 +105,19 @@ class SceneBvh:
         b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
         self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
         self.used[g] = used
+        self.plans[g] = refit_plan(b.child, b.count, n0, used)
+        self._refit_args = None
+
+    def refit_args(self):
+        """refit's plan arrays for the moving trees, joined (kept until a rebuild)."""
+        if self._refit_args is None:
+            plans = [self.plans[g] for g in self._moving_idx]
+            leaves, front, ends, tops = (np.concatenate([p[k] for p in plans]) for k in range(4))
+            front_start = np.cumsum([0] + [len(p[1]) for p in plans]).astype(np.int64)
+            tops_start = np.cumsum([0] + [len(p[3]) for p in plans]).astype(np.int64)
+            self._refit_args = (leaves, front, ends, front_start, tops, tops_start,
+                                np.ascontiguousarray(self.node_lo[self._moving_idx]))
+        return self._refit_args
 
     def build_all(self, tri_verts):
         """Build every tree anew from these triangle corners (the first
@@ -125,9 +140,9 @@ class SceneBvh:
             idx = self._moving_idx
             if len(idx):
                 b = self.bvh
-                lo = self.node_lo[idx]
+                args = self.refit_args()
                 cost = np.empty(len(idx), np.float32)
-                refit(tri_verts, lo, lo + self.used[idx], b.node, b.node_i, b.tri, b.verts, cost)
+                refit(tri_verts, *args, b.node, b.node_i, b.tri, b.verts, np.empty(len(args[1])), cost)
                 self.cost[idx] = cost
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0

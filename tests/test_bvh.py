@@ -340,3 +340,42 @@ def test_trees_stay_within_their_depth_bound():
     want = brute_force_closest(o, d, np.zeros(400, np.float32), np.full(400, np.inf, np.float32), tv)
     for mode in (SHARED_ORIGIN, SINGLE):
         _agree(bvh_trace_rays(b, o, d, mode=mode), want, tv)
+
+
+def test_refit_boxes_are_tight_and_its_cost_is_the_trees(rng):
+    """After a refit every used node's box is exactly its triangles' (a leaf)
+    or its children's (inner) union, and the refit's SAH cost equals
+    sah_cost's: checked on a tree large enough to be refit in pieces
+    (bvh_build.refit_plan) and on small ones refit whole; the pieces cover
+    every node once."""
+    from raycore.bvh_build import REFIT_MIN_NODES, refit_plan
+    big = np.ascontiguousarray(soup(rng, 3000, spread=4.0, size=0.2))
+    small = np.ascontiguousarray(soup(rng, 40, spread=1.0, size=0.2))
+    tv0 = np.ascontiguousarray(np.concatenate([big, small, small + np.float32(3)]))
+    trees = SceneBvh.of_objects(len(tv0), [(0, 3000), (3000, 3040), (3040, 3080)])
+    trees.update(tv0)
+    b = trees.bvh
+    for g, n0 in enumerate(trees.node_lo[:3]):
+        used = int(trees.used[g])
+        leaves, front, ends, tops = refit_plan(b.child, b.count, int(n0), used)
+        covered = np.zeros(used, int)
+        for x, e in zip(front, ends):
+            covered[x - n0] += 1
+            if e > x + 1:
+                covered[b.child[x] - n0:e - n0] += 1
+        covered[tops - n0] += 1
+        np.testing.assert_array_equal(covered, 1)
+        assert (len(front) > 1) == (used >= REFIT_MIN_NODES)
+    tv = tv0 + np.float32(0.05) * rng.normal(size=tv0.shape).astype(np.float32)
+    trees.update(tv)
+    assert trees.stats["bvh_rebuilt"] == 0
+    for g, n0 in enumerate(trees.node_lo[:3]):
+        for i in range(int(n0), int(n0) + int(trees.used[g])):
+            if b.count[i] > 0:
+                corners = tv[b.tri[b.child[i]:b.child[i] + b.count[i]]].reshape(-1, 3)
+                np.testing.assert_array_equal(b.box[i], np.r_[corners.min(0), corners.max(0)])
+            else:
+                c = b.child[i]
+                np.testing.assert_array_equal(b.box[i], np.r_[np.minimum(b.box[c, :3], b.box[c + 1, :3]),
+                                                              np.maximum(b.box[c, 3:], b.box[c + 1, 3:])])
+        assert trees.cost[g] == pytest.approx(sah_cost(b.box, b.child, b.count, int(n0)), rel=1e-6)
