@@ -312,11 +312,7 @@ class AnimatedScene:
                              f"frames {spec.frames.start}..{spec.frames.end} would share one file")
         if not spec.lights:
             self.warnings.append("no lights: surfaces get the ambient term only")
-        blurred = spec.render.motion_blur.shutter > 0 or spec.camera.aperture_radius > 0
-        if blurred and spec.render.spp == 1 and spec.render.max_error == 0:
-            self.warnings.append("render.motion_blur / camera.aperture_radius with spp 1: one pass at the "
-                                 "shutter's middle and the lens centre shows no blur; raise render.spp "
-                                 "(each pass is one time and lens position) or set render.max_error")
+
         self._warn_outside_keys()
 
     def _add_texture(self, material, source, key):

@@ -244,7 +244,7 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
         raise click.UsageError("--workers and --scheduler exclude each other")
     from anim.render.frame_files import frame_path
     from anim.render.job import RenderJob, render_animation
-    from anim.render.settings import config_of
+    from anim.render.settings import config_of, one_pass_blur_warning
     from raycore._jit import set_threads
 
     from .report import progress, summary_table
@@ -276,6 +276,8 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
                     max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
                     width=width, height=height, shutter=shutter)
+    if (blur_warning := one_pass_blur_warning(cfg)) is not None:
+        click.echo(f"frustrace: warning: {blur_warning}", err=True)
     first = Path(frame_path(spec.output.path, frames[0]))
     frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
     stats_path = stats_path or frames_dir / "stats.json"
@@ -542,7 +544,7 @@ def check(anim_yaml, camera, strict):
     textures) and summarise it; render nothing. What passes here, `render`
     accepts. A USD stage is described: what came from it, what from
     frustrace's defaults."""
-    from anim.render.settings import shading_of
+    from anim.render.settings import config_of, one_pass_blur_warning, shading_of
     scene = load_scene(anim_yaml, camera)
     if strict and scene.outside_paths:
         key, ref = scene.outside_paths[0]
@@ -559,6 +561,8 @@ def check(anim_yaml, camera, strict):
                f"{_count(len(scene.texture_paths), 'texture')}, "
                f"camera {'animated' if spec.camera.keys else 'static'}")
     blur, cam = spec.render.motion_blur, spec.camera
+    if (blur_warning := one_pass_blur_warning(config_of(scene))) is not None:
+        click.echo(f"  warning: {blur_warning}")
     if blur.shutter > 0:
         click.echo(f"  motion blur: shutter {blur.shutter:g} frame intervals ({blur.shutter / spec.frames.fps * 1e3:.4g} ms), "
                    f"{blur.position}; one shutter time per pass, {spec.render.spp} per frame"

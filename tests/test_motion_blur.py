@@ -260,3 +260,17 @@ def test_an_object_held_still_within_the_shutter_is_not_placed_per_pass(tmp_path
     placed.clear()
     renderer.render(scene.time_of(1))                 # shutter 0.75..1.25: the tube's last key is inside
     assert len(placed) == 1 + 8
+
+
+def test_one_pass_of_blur_is_warned_and_more_passes_are_not(tmp_path):
+    """Blur or a lens with one pass shows nothing: `check` and `render` say
+    so; with --spp above 1 (the command line's, not only the file's) not."""
+    from click.testing import CliRunner
+    from cli.main import main
+    path = edge_scene(tmp_path, ", motion_blur: {shutter: 0.5}")
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 0 and "shows no blur" in res.output and "motion blur: shutter 0.5" in res.output
+    args = ["render", str(path), "-o", str(tmp_path / "o"), "--frames", "2:2", "--quiet", "--overwrite"]
+    assert "shows no blur" in CliRunner().invoke(main, args).output
+    res = CliRunner().invoke(main, args + ["--spp", "4"])
+    assert res.exit_code == 0 and "shows no blur" not in res.output

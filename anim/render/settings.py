@@ -23,6 +23,15 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
     return RenderConfig(**base)
 
 
+def one_pass_blur_warning(cfg: RenderConfig):
+    """The warning for motion blur or a lens that one pass cannot show, or None."""
+    if (cfg.shutter > 0 or cfg.aperture_radius > 0) and cfg.spp == 1 and cfg.max_error == 0:
+        return ("motion blur / depth of field with spp 1: the one pass is at the shutter's middle and the "
+                "lens centre and shows no blur; raise --spp or render.spp (each pass takes one time and "
+                "lens point) or set --max-error")
+    return None
+
+
 def _read_texture_bytes(data: bytes, suffix: str, space: str):
     """A texture stored inside a scene file (a .glb's image): decoded from a
     temporary file, since OpenImageIO reads files."""
