@@ -120,9 +120,9 @@ def _light_is_dark(light) -> bool:
 class PassScene:
     """The structures, vertex normals and camera that a pass traces: built
     once for a frame without motion blur, moved to each pass's time under
-    it (rebuilt only when the vertices or the camera changed: what does not
-    move within the shutter is not built again), and the camera put at each
-    pass's lens position under a thin lens."""
+    it (rebuilt only when the vertices changed: a frame in which only the
+    camera moves, or nothing within the shutter, builds once), and the
+    camera put at each pass's lens position under a thin lens."""
 
     def __init__(self, names, geom, pose, cfg, scene_grid, buffers, counters, timings, motion,
                  camera_accel, shadow_accel):
