@@ -285,15 +285,13 @@ REFIT_MIN_NODES = 512
 
 def refit_plan(child, count, root, used):
     """What refit needs of one tree (nodes root..root+used-1), made once per
-    build: its leaves; `front`, subtrees that cover it, and `front_end`, the
-    end of each one's descendants; `tops`, the nodes above them, last first.
+    build: `front`, subtrees that cover it, and `front_end`, the end of each
+    one's descendants; `tops`, the nodes above them, last first.
 
     The build pushes a node's right child below its left one, so a node's
     descendants are the contiguous run child[x] .. front_end - 1 (the left
     subtree's, then the right one's): every piece is refit from the end of
     its run back to its root with no other piece's node in between."""
-    region = np.arange(root, root + used)
-    leaves = region[count[root:root + used] > 0]
     front, tops = [root], []
     if used >= REFIT_MIN_NODES:
         while len(front) < REFIT_PIECES:
@@ -306,8 +304,7 @@ def refit_plan(child, count, root, used):
             front += [int(child[x]), int(child[x]) + 1]
     front.sort()
     ends = [_run_end(child, count, x) if count[x] <= 0 and child[x] >= 0 else x + 1 for x in front]
-    return (leaves.astype(np.int64), np.array(front, np.int64), np.array(ends, np.int64),
-            np.array(sorted(tops, reverse=True), np.int64))
+    return np.array(front, np.int64), np.array(ends, np.int64), np.array(sorted(tops, reverse=True), np.int64)
 
 
 def _run_end(child, count, x):
@@ -323,39 +320,13 @@ def _run_end(child, count, x):
 
 
 @helper
-def _refit_node(node, node_i, i):
-    """Node i's box from its children's (an inner node; a leaf's is made
-    by the leaf pass); returns its SAH term (area times the node's cost)."""
+def _refit_node(tri_verts, node, node_i, tri, verts, i):
+    """Node i's box: a leaf's from its triangles' corners now (copied into
+    `verts` in leaf order; corners that are not finite left out, as in the
+    build), an inner node's from its children's. Returns its SAH term
+    (area times the node's cost)."""
     c = node_i[i, COUNT]
-    if c <= 0:
-        left = node_i[i, CHILD]
-        if left < 0:
-            return np.float64(0.0)
-        for q in range(3):
-            node[i, q] = min(node[left, q], node[left + 1, q])
-            node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
-    a = np.float64(_area(node[i, 0], node[i, 1], node[i, 2], node[i, 3], node[i, 4], node[i, 5]))
-    return a * (np.float64(C_INTERSECT) * c if c > 0 else np.float64(C_TRAVERSE))
-
-
-@parallel_kernel
-def refit(tri_verts, leaves, front, front_end, front_start, tops, tops_start, roots, node, node_i, tri,
-          verts, part, cost):
-    """Refit trees to the triangles' positions now (tree g: root roots[g],
-    pieces front[front_start[g]:front_start[g+1]], nodes above them
-    tops[tops_start[g]:...]; refit_plan). Every leaf, in parallel, copies
-    its triangles' corners into `verts` (leaf order) and takes their box
-    (corners that are not finite left out, as in the build); then every
-    piece, in parallel, takes the union of children's boxes from the end of
-    its run back to its root (children always follow their parent: a walk
-    through memory, measured 3x faster than breadth first on 100K
-    triangles) and sums its SAH terms into part; then each tree's few top
-    nodes, and cost[g], the SAH cost relative to the root's area (as
-    sah_cost). One big tree (a runner) no longer refits its inner nodes on
-    one thread."""
-    for jj in prange(leaves.shape[0]):
-        i = leaves[jj]
-        c = node_i[i, COUNT]
+    if c > 0:
         x0 = y0 = z0 = np.float32(np.inf)
         x1 = y1 = z1 = np.float32(-np.inf)
         first = node_i[i, CHILD]
@@ -377,19 +348,57 @@ def refit(tri_verts, leaves, front, front_end, front_start, tops, tops_start, ro
                 z1 = max(z1, z) if abs(z) < INF else z1
         node[i, 0], node[i, 1], node[i, 2] = x0, y0, z0
         node[i, 3], node[i, 4], node[i, 5] = x1, y1, z1
+    else:
+        left = node_i[i, CHILD]
+        if left < 0:
+            return np.float64(0.0)
+        for q in range(3):
+            node[i, q] = min(node[left, q], node[left + 1, q])
+            node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
+    a = np.float64(_area(node[i, 0], node[i, 1], node[i, 2], node[i, 3], node[i, 4], node[i, 5]))
+    return a * (np.float64(C_INTERSECT) * c if c > 0 else np.float64(C_TRAVERSE))
+
+
+@parallel_kernel
+def refit(tri_verts, front, front_end, front_start, tops, tops_start, roots, node, node_i, tri, verts,
+          part, cost):
+    """Refit trees to the triangles' positions now (tree g: root roots[g],
+    pieces front[front_start[g]:front_start[g+1]], nodes above them
+    tops[tops_start[g]:...]; refit_plan; -1 marks an unused slot). Every piece, in parallel, walks
+    its run of nodes from the end back to its root (children always follow
+    their parent, so a node's are done before it: a walk through memory,
+    measured 3x faster than breadth first on 100K triangles), boxing leaves
+    from their triangles and inner nodes from their children, and sums its
+    SAH terms into part; then each tree's few top nodes, and cost[g], the
+    SAH cost relative to the root's area (as sah_cost). One big tree (a
+    runner) is no longer refit on one thread, and a piece's leaves and
+    inner nodes are boxed while in cache, in one parallel loop."""
     for f in prange(front.shape[0]):
         x = front[f]
+        if x < 0:                                      # an unused slot
+            part[f] = 0.0
+            continue
+        # an inner node's run from its end back to child[x], then x itself
+        # (one call site: the helper is inlined where it is called)
+        run = front_end[f] - node_i[x, CHILD] if front_end[f] > x + 1 else 0
         total = np.float64(0.0)
-        if front_end[f] > x + 1:                       # an inner node: its run, then itself
-            for i in range(front_end[f] - 1, node_i[x, CHILD] - 1, -1):
-                total += _refit_node(node, node_i, i)
-        part[f] = total + _refit_node(node, node_i, x)
+        for k in range(run + 1):
+            total += _refit_node(tri_verts, node, node_i, tri, verts, front_end[f] - 1 - k if k < run else x)
+        part[f] = total
     for g in range(roots.shape[0]):                    # a few nodes a tree: not worth a parallel region
         total = np.float64(0.0)
         for f in range(front_start[g], front_start[g + 1]):
             total += part[f]
         for k in range(tops_start[g], tops_start[g + 1]):
-            total += _refit_node(node, node_i, tops[k])
+            i = tops[k]                                # inner nodes: their children's union
+            if i < 0:
+                break
+            left = node_i[i, CHILD]
+            for q in range(3):
+                node[i, q] = min(node[left, q], node[left + 1, q])
+                node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
+            total += np.float64(C_TRAVERSE) * np.float64(_area(node[i, 0], node[i, 1], node[i, 2],
+                                                               node[i, 3], node[i, 4], node[i, 5]))
         root = roots[g]
         root_area = np.float64(_area(node[root, 0], node[root, 1], node[root, 2],
                                      node[root, 3], node[root, 4], node[root, 5]))

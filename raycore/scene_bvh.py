@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .bvh_build import MAX_LEAF, Bvh, build_region, empty_bvh, prim_bounds, refit, refit_plan, sah_cost
+from .bvh_build import MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, prim_bounds, refit, refit_plan, sah_cost
 
 # a refit tree is rebuilt when its SAH cost exceeds this many times its cost
 # at the last build. The SAH cost is the expected work of a ray, so a tree
@@ -61,8 +61,17 @@ class SceneBvh:
         self.stats = {}
         self._moving_idx = np.array([g for g in range(n_groups) if self.moving[g]], np.int64)
         self.used = np.zeros(n_groups, np.int64)     # nodes each tree's build used
-        self.plans = [None] * n_groups               # each tree's refit_plan, made by its build
-        self._refit_args = None                      # the moving trees' plans joined, until a rebuild
+        # the moving trees' refit plans (bvh_build.refit_plan) in fixed slots,
+        # REFIT_PIECES pieces and REFIT_PIECES - 1 top nodes a tree (-1: unused),
+        # rewritten by a tree's build: no joining of 110 marbles' plans per frame
+        n_moving = len(self._moving_idx)
+        self.slot = {int(g): j for j, g in enumerate(self._moving_idx)}
+        self.front = np.full(n_moving * REFIT_PIECES, -1, np.int64)
+        self.front_end = np.zeros(n_moving * REFIT_PIECES, np.int64)
+        self.tops = np.full(n_moving * (REFIT_PIECES - 1), -1, np.int64)
+        self.front_start = np.arange(n_moving + 1, dtype=np.int64) * REFIT_PIECES
+        self.tops_start = np.arange(n_moving + 1, dtype=np.int64) * (REFIT_PIECES - 1)
+        self.part = np.empty(n_moving * REFIT_PIECES)
 
     @classmethod
     def of_objects(cls, n_tris, object_ranges=None, moving_tris=None):
@@ -105,19 +114,14 @@ class SceneBvh:
         b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
         self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
         self.used[g] = used
-        self.plans[g] = refit_plan(b.child, b.count, n0, used)
-        self._refit_args = None
-
-    def refit_args(self):
-        """refit's plan arrays for the moving trees, joined (kept until a rebuild)."""
-        if self._refit_args is None:
-            plans = [self.plans[g] for g in self._moving_idx]
-            leaves, front, ends, tops = (np.concatenate([p[k] for p in plans]) for k in range(4))
-            front_start = np.cumsum([0] + [len(p[1]) for p in plans]).astype(np.int64)
-            tops_start = np.cumsum([0] + [len(p[3]) for p in plans]).astype(np.int64)
-            self._refit_args = (leaves, front, ends, front_start, tops, tops_start,
-                                np.ascontiguousarray(self.node_lo[self._moving_idx]))
-        return self._refit_args
+        if self.moving[g]:
+            front, ends, tops = refit_plan(b.child, b.count, n0, used)
+            j = self.slot[g]
+            pieces = slice(j * REFIT_PIECES, (j + 1) * REFIT_PIECES)
+            self.front[pieces], self.front_end[pieces], self.tops[self.tops_start[j]:self.tops_start[j + 1]] = -1, 0, -1
+            self.front[pieces.start:pieces.start + len(front)] = front
+            self.front_end[pieces.start:pieces.start + len(front)] = ends
+            self.tops[self.tops_start[j]:self.tops_start[j] + len(tops)] = tops
 
     def build_all(self, tri_verts):
         """Build every tree anew from these triangle corners (the first
@@ -140,9 +144,9 @@ class SceneBvh:
             idx = self._moving_idx
             if len(idx):
                 b = self.bvh
-                args = self.refit_args()
                 cost = np.empty(len(idx), np.float32)
-                refit(tri_verts, *args, b.node, b.node_i, b.tri, b.verts, np.empty(len(args[1])), cost)
+                refit(tri_verts, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
+                      self.node_lo[idx], b.node, b.node_i, b.tri, b.verts, self.part, cost)
                 self.cost[idx] = cost
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0

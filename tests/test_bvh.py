@@ -357,7 +357,7 @@ def test_refit_boxes_are_tight_and_its_cost_is_the_trees(rng):
     b = trees.bvh
     for g, n0 in enumerate(trees.node_lo[:3]):
         used = int(trees.used[g])
-        leaves, front, ends, tops = refit_plan(b.child, b.count, int(n0), used)
+        front, ends, tops = refit_plan(b.child, b.count, int(n0), used)
         covered = np.zeros(used, int)
         for x, e in zip(front, ends):
             covered[x - n0] += 1
