@@ -164,6 +164,7 @@ class PassScene:
             return
         self.key = sample
         u, lx, ly = sample
+        self.counters["passes"] += 1
         self.times_seen.add(u)
         self.lens_seen.add((lx, ly))
         if self.motion is not None:
@@ -210,7 +211,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
     timings = {"build_ms": 0.0, "trace_ms": 0.0, "shadow_ms": 0.0, "shade_ms": 0.0}
     counters = {"rays": 0, "shadow_rays": 0, "shadow_rays_skipped": 0, "lights_skipped": 0,
                 "tri_tests": 0, "cells": 0, "fallback_rays": 0,
-                "primary_packets": 0, "primary_visits": 0, "primary_tests": 0, "builds": 0}
+                "primary_packets": 0, "primary_visits": 0, "primary_tests": 0, "builds": 0, "passes": 0}
     if scene_grid is None:
         scene_grid = SceneGrid(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces, cfg.grid_density)
     lit = [li for li in range(n_lights) if not _light_is_dark(shading.lights[li])]

@@ -274,3 +274,18 @@ def test_one_pass_of_blur_is_warned_and_more_passes_are_not(tmp_path):
     assert "shows no blur" in CliRunner().invoke(main, args).output
     res = CliRunner().invoke(main, args + ["--spp", "4"])
     assert res.exit_code == 0 and "shows no blur" not in res.output
+
+
+def test_stats_give_the_passes_and_their_rebuild_time(tmp_path):
+    """stats.json under motion blur: time and lens samples, passes, builds
+    and rebuild ms per pass (the frame's build_ms over its passes)."""
+    import json
+    from click.testing import CliRunner
+    from cli.main import main
+    path = edge_scene(tmp_path, ", motion_blur: {shutter: 0.5}", ", aperture_radius: 0.1", spp=8)
+    out = tmp_path / "o"
+    res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "--frames", "2:2", "--quiet"])
+    assert res.exit_code == 0, res.output
+    f = json.loads((out / "stats.json").read_text())["frames"][0]
+    assert (f["time_samples"], f["lens_samples"], f["passes"], f["builds"]) == (8, 8, 8, 8)
+    assert f["rebuild_ms_per_pass"] == pytest.approx(f["build_ms"] / 8)

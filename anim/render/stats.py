@@ -114,8 +114,8 @@ def frame_row(scene, frame, t, interp_ms, result) -> dict:
             # under motion blur or a thin lens: the shutter times and lens positions
             # the passes took, and how often (and how long) the structures were built
             **({"time_samples": result.counters["time_samples"], "lens_samples": result.counters["lens_samples"],
-                "builds": result.counters["builds"],
-                "build_ms_per_build": tm["build_ms"] / max(result.counters["builds"], 1)}
+                "passes": result.counters["passes"], "builds": result.counters["builds"],
+                "rebuild_ms_per_pass": tm["build_ms"] / max(result.counters["passes"], 1)}
                if "time_samples" in result.counters else {}),
             # RGB values that half floats cannot hold (they are written as +inf)
             **({"half_overflow": n_over} if (n_over := half_overflow(result.rgba)) else {}),
