@@ -117,6 +117,20 @@ def _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1):
             max(x1, bin_box[a, b, 3]), max(y1, bin_box[a, b, 4]), max(z1, bin_box[a, b, 5]))
 
 
+@helper
+def _bin_of(c, lo, scale):
+    """The bin (0 .. N_BINS - 1) of centroid coordinate c. An extent near the
+    smallest float32 makes scale = N_BINS / extent infinite, and then
+    (c - lo) * scale is inf or, at c = lo, NaN; int() of either is undefined
+    (it gave a negative bin: a write outside the bin arrays, found with
+    NUMBA_BOUNDSCHECK on triangles at 2^-125). NaN and below 0 go to bin 0,
+    inf and above to the last."""
+    f = (c - lo) * scale
+    if f >= np.float32(N_BINS - 1):
+        return N_BINS - 1
+    return int(f) if f > np.float32(0.0) else 0
+
+
 @kernel
 def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
     """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
@@ -181,7 +195,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                     bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
             for k in range(s, e):
                 for a in range(3):
-                    b = min(int((centroids[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                    b = _bin_of(centroids[k, a], c_lo[a], scale[a])
                     bin_n[a, b] += 1
                     for q in range(3):
                         bin_box[a, b, q] = min(bin_box[a, b, q], bounds[k, q])
@@ -224,7 +238,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
             a = best_axis
             i, j = s, e - 1
             while i <= j:
-                b = min(int((centroids[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                b = _bin_of(centroids[i, a], c_lo[a], scale[a])
                 if b <= best_bin:
                     i += 1
                 else:

@@ -379,3 +379,23 @@ def test_refit_boxes_are_tight_and_its_cost_is_the_trees(rng):
                 np.testing.assert_array_equal(b.box[i], np.r_[np.minimum(b.box[c, :3], b.box[c + 1, :3]),
                                                               np.maximum(b.box[c, 3:], b.box[c + 1, 3:])])
         assert trees.cost[g] == pytest.approx(sah_cost(b.box, b.child, b.count, int(n0)), rel=1e-6)
+
+
+def test_a_centroid_bin_is_in_range_when_the_scale_overflows():
+    """bvh_build._bin_of: an extent near the smallest float32 makes the bin
+    scale infinite, and (c - lo) * scale inf or NaN; int() of those gave a
+    negative bin, a write outside the build's bin arrays (found under
+    NUMBA_BOUNDSCHECK with triangles at 2^-125). Every bin is in range, and
+    ordinary values bin as before."""
+    from raycore.bvh_build import N_BINS, _bin_of
+    f32 = np.float32
+    inf = f32(np.inf)
+    assert _bin_of(f32(1e-38), f32(1e-38), inf) == 0                # 0 * inf = NaN
+    assert _bin_of(f32(2e-38), f32(1e-38), inf) == N_BINS - 1       # inf
+    assert _bin_of(f32(np.nan), f32(0), f32(1)) == 0
+    assert _bin_of(f32(-1), f32(0), f32(1)) == 0
+    rng = np.random.default_rng(5)
+    lo, ext = f32(-3.0), f32(7.0)
+    scale = f32(N_BINS) * f32(0.99999) / ext
+    for c in (lo + ext * rng.random(1000)).astype(np.float32):
+        assert _bin_of(c, lo, scale) == min(int((c - lo) * scale), N_BINS - 1)
