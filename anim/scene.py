@@ -448,7 +448,7 @@ class AnimatedScene:
     def time_of(self, frame):
         return frame / self.spec.frames.fps
 
-    def vertices_at(self, t, held=()):
+    def vertices_at(self, t, held=frozenset()):
         """(n_v, 3) f32 positions at time t; only moving objects are
         recomputed, and of those placed one by one, not the ones in `held`
         (objects held still over a shutter, already in place: see

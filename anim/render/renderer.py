@@ -79,7 +79,7 @@ class Shutter:
         # objects that cannot move within the shutter stay where the frame
         # time put them (it lies in the shutter): not placed again per pass
         t_open, t_close = self.time_of(0.0), self.time_of(1.0)
-        self.held = [o for o in scene.one_by_one if o.held_over(t_open, t_close)]
+        self.held = {o for o in scene.one_by_one if o.held_over(t_open, t_close)}
 
     def time_of(self, u):
         return self.t + (self.opens + u) * self.length     # exactly t at u = 1/2 when centred
