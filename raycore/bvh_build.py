@@ -117,18 +117,22 @@ def _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1):
             max(x1, bin_box[a, b, 3]), max(y1, bin_box[a, b, 4]), max(z1, bin_box[a, b, 5]))
 
 
+# the largest bin scale: N_BINS / extent overflows float32 for extents
+# near the smallest float32 (triangles at 2^-125)
+MAX_BIN_SCALE = np.float32(1e30)
+
+
 @helper
-def _bin_of(c, lo, scale):
-    """The bin (0 .. N_BINS - 1) of centroid coordinate c. An extent near the
-    smallest float32 makes scale = N_BINS / extent infinite, and then
-    (c - lo) * scale is inf or, at c = lo, NaN; int() of either is undefined
-    (it gave a negative bin: a write outside the bin arrays, found with
-    NUMBA_BOUNDSCHECK on triangles at 2^-125). NaN and below 0 go to bin 0,
-    inf and above to the last."""
-    f = (c - lo) * scale
-    if f >= np.float32(N_BINS - 1):
-        return N_BINS - 1
-    return int(f) if f > np.float32(0.0) else 0
+def _bin_scale(ext):
+    """Bins per unit of an axis whose centroids span `ext`: 0 (the axis is
+    not binned) unless 0 < ext < inf, and never more than MAX_BIN_SCALE.
+    Then (c - lo) * scale is finite and in [0, N_BINS) for every centroid c
+    (0 <= c - lo <= ext), and int() of it is a bin. An infinite scale gave
+    (c - lo) * scale = NaN at c = lo, and int(NaN) a negative bin: a write
+    outside the bin arrays (found under NUMBA_BOUNDSCHECK)."""
+    if not (ext > np.float32(0.0) and ext < INF):
+        return np.float32(0.0)
+    return min(np.float32(N_BINS) * np.float32(0.99999) / ext, MAX_BIN_SCALE)
 
 
 @kernel
@@ -188,20 +192,22 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         if n > 1 and depth < SAH_DEPTH and (ext[0] > 0 or ext[1] > 0 or ext[2] > 0):
             scale = np.empty(3, np.float32)
             for a in range(3):
-                scale[a] = np.float32(N_BINS) * np.float32(0.99999) / ext[a] if ext[a] > 0 else np.float32(0.0)
+                scale[a] = _bin_scale(ext[a])
                 for b in range(N_BINS):
                     bin_n[a, b] = 0
                     bin_box[a, b, 0] = bin_box[a, b, 1] = bin_box[a, b, 2] = np.float32(np.inf)
                     bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
             for k in range(s, e):
                 for a in range(3):
-                    b = _bin_of(centroids[k, a], c_lo[a], scale[a])
+                    if scale[a] == 0:                  # not binned: c - lo may not be finite
+                        continue
+                    b = min(int((centroids[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                     bin_n[a, b] += 1
                     for q in range(3):
                         bin_box[a, b, q] = min(bin_box[a, b, q], bounds[k, q])
                         bin_box[a, b, 3 + q] = max(bin_box[a, b, 3 + q], bounds[k, 3 + q])
             for a in range(3):
-                if ext[a] <= 0:
+                if scale[a] == 0:
                     continue
                 # right-to-left sweep: area and count of bins b..N_BINS-1
                 x0 = y0 = z0 = np.float32(np.inf)
@@ -238,7 +244,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
             a = best_axis
             i, j = s, e - 1
             while i <= j:
-                b = _bin_of(centroids[i, a], c_lo[a], scale[a])
+                b = min(int((centroids[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                 if b <= best_bin:
                     i += 1
                 else:

@@ -381,21 +381,24 @@ def test_refit_boxes_are_tight_and_its_cost_is_the_trees(rng):
         assert trees.cost[g] == pytest.approx(sah_cost(b.box, b.child, b.count, int(n0)), rel=1e-6)
 
 
-def test_a_centroid_bin_is_in_range_when_the_scale_overflows():
-    """bvh_build._bin_of: an extent near the smallest float32 makes the bin
-    scale infinite, and (c - lo) * scale inf or NaN; int() of those gave a
-    negative bin, a write outside the build's bin arrays (found under
-    NUMBA_BOUNDSCHECK with triangles at 2^-125). Every bin is in range, and
-    ordinary values bin as before."""
-    from raycore.bvh_build import N_BINS, _bin_of
+def test_the_bin_scale_keeps_every_bin_in_range():
+    """bvh_build._bin_scale: an extent near the smallest float32 made the bin
+    scale infinite, (c - lo) * scale NaN at c = lo, and int(NaN) a negative
+    bin, a write outside the build's bin arrays (found under
+    NUMBA_BOUNDSCHECK with triangles at 2^-125). The scale is finite, 0 for
+    an extent that is 0, infinite or NaN (the axis is not binned), and every
+    centroid of a binned axis lands in 0 .. N_BINS - 1."""
+    from raycore.bvh_build import MAX_BIN_SCALE, N_BINS, _bin_scale
     f32 = np.float32
-    inf = f32(np.inf)
-    assert _bin_of(f32(1e-38), f32(1e-38), inf) == 0                # 0 * inf = NaN
-    assert _bin_of(f32(2e-38), f32(1e-38), inf) == N_BINS - 1       # inf
-    assert _bin_of(f32(np.nan), f32(0), f32(1)) == 0
-    assert _bin_of(f32(-1), f32(0), f32(1)) == 0
+    for ext in (f32(0), f32(np.inf), f32(np.nan), f32(-1)):
+        assert _bin_scale(ext) == 0
+    assert _bin_scale(f32(1e-40)) == MAX_BIN_SCALE and np.isfinite(_bin_scale(f32(2.0 ** -149)))
     rng = np.random.default_rng(5)
-    lo, ext = f32(-3.0), f32(7.0)
-    scale = f32(N_BINS) * f32(0.99999) / ext
-    for c in (lo + ext * rng.random(1000)).astype(np.float32):
-        assert _bin_of(c, lo, scale) == min(int((c - lo) * scale), N_BINS - 1)
+    for ext in (f32(1e-40), f32(1e-30), f32(7.0), f32(3e38)):
+        lo = f32(-ext / 2) if np.isfinite(f32(-ext / 2)) else f32(0)
+        c = np.r_[lo, lo + ext, (lo + ext * rng.random(1000)).astype(np.float32)].astype(np.float32)
+        c = c[(c >= lo) & (c <= lo + ext)]
+        f = (c - lo) * _bin_scale(ext)
+        assert np.all(np.isfinite(f)) and np.all(f >= 0)
+        assert np.all(np.minimum(f.astype(np.int64), N_BINS - 1) <= N_BINS - 1)
+        assert f.max() < N_BINS
