@@ -340,6 +340,15 @@ def _run_end(child, count, x):
 
 
 @helper
+def _union_children(node, node_i, i):
+    """Inner node i's box from its two children's (they follow it in memory)."""
+    left = node_i[i, CHILD]
+    for q in range(3):
+        node[i, q] = min(node[left, q], node[left + 1, q])
+        node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
+
+
+@helper
 def _refit_node(tri_verts, node, node_i, tri, verts, i):
     """Node i's box: a leaf's from its triangles' corners now (copied into
     `verts` in leaf order; corners that are not finite left out, as in the
@@ -368,13 +377,10 @@ def _refit_node(tri_verts, node, node_i, tri, verts, i):
                 z1 = max(z1, z) if abs(z) < INF else z1
         node[i, 0], node[i, 1], node[i, 2] = x0, y0, z0
         node[i, 3], node[i, 4], node[i, 5] = x1, y1, z1
+    elif node_i[i, CHILD] < 0:
+        return np.float64(0.0)
     else:
-        left = node_i[i, CHILD]
-        if left < 0:
-            return np.float64(0.0)
-        for q in range(3):
-            node[i, q] = min(node[left, q], node[left + 1, q])
-            node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
+        _union_children(node, node_i, i)
     a = np.float64(_area(node[i, 0], node[i, 1], node[i, 2], node[i, 3], node[i, 4], node[i, 5]))
     return a * (np.float64(C_INTERSECT) * c if c > 0 else np.float64(C_TRAVERSE))
 
@@ -413,10 +419,7 @@ def refit(tri_verts, front, front_end, front_start, tops, tops_start, roots, nod
             i = tops[k]                                # inner nodes: their children's union
             if i < 0:
                 break
-            left = node_i[i, CHILD]
-            for q in range(3):
-                node[i, q] = min(node[left, q], node[left + 1, q])
-                node[i, 3 + q] = max(node[left, 3 + q], node[left + 1, 3 + q])
+            _union_children(node, node_i, i)
             total += np.float64(C_TRAVERSE) * np.float64(_area(node[i, 0], node[i, 1], node[i, 2],
                                                                node[i, 3], node[i, 4], node[i, 5]))
         root = roots[g]

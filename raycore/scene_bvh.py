@@ -117,11 +117,10 @@ class SceneBvh:
         if self.moving[g]:
             front, ends, tops = refit_plan(b.child, b.count, n0, used)
             j = self.slot[g]
-            pieces = slice(j * REFIT_PIECES, (j + 1) * REFIT_PIECES)
-            self.front[pieces], self.front_end[pieces], self.tops[self.tops_start[j]:self.tops_start[j + 1]] = -1, 0, -1
-            self.front[pieces.start:pieces.start + len(front)] = front
-            self.front_end[pieces.start:pieces.start + len(front)] = ends
-            self.tops[self.tops_start[j]:self.tops_start[j] + len(tops)] = tops
+            p0, t0 = self.front_start[j], self.tops_start[j]
+            self.front[p0:self.front_start[j + 1]], self.tops[t0:self.tops_start[j + 1]] = -1, -1
+            self.front[p0:p0 + len(front)], self.front_end[p0:p0 + len(front)] = front, ends
+            self.tops[t0:t0 + len(tops)] = tops
 
     def build_all(self, tri_verts):
         """Build every tree anew from these triangle corners (the first
