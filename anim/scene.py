@@ -312,7 +312,6 @@ class AnimatedScene:
                              f"frames {spec.frames.start}..{spec.frames.end} would share one file")
         if not spec.lights:
             self.warnings.append("no lights: surfaces get the ambient term only")
-
         self._warn_outside_keys()
 
     def _add_texture(self, material, source, key):
