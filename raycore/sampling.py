@@ -15,16 +15,20 @@ def sample_offsets(spp: int) -> list:
     by tests/test_error_budget.py). Deterministic, low discrepancy."""
     if spp <= 1:
         return [(0.5, 0.5)]
-    out = []
     half_cell = 0.5 / (1 << (spp - 1).bit_length())     # the radical inverses are multiples of 2 half_cell
-    for i in range(spp):
-        bits, f, inv = i, 0.0, 0.5
-        while bits:
-            f += inv * (bits & 1)
-            bits >>= 1
-            inv *= 0.5
-        out.append(((i + 0.5) / spp, f + half_cell))
-    return out
+    return [((i + 0.5) / spp, radical_inverse(i, 2) + half_cell) for i in range(spp)]
+
+
+def radical_inverse(i: int, base: int, scramble: int = 1) -> float:
+    """i's digits in `base` mirrored about the point: 0, 1/b, 2/b, ..., 1/b^2, ...;
+    each digit d taken as (scramble d) mod base (a permutation when scramble
+    and base are coprime)."""
+    f, inv = 0.0, 1.0 / base
+    while i:
+        f += inv * (scramble * (i % base) % base)
+        i //= base
+        inv /= base
+    return f
 
 
 def sobol_point(i: int) -> tuple:

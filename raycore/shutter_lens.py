@@ -33,7 +33,7 @@ which keeps the strata's areas and shapes.
 """
 import numpy as np
 
-from .sampling import nested_before_cap
+from .sampling import nested_before_cap, radical_inverse
 
 # base 7's digits d taken as 4 d mod 7: the plain radical inverses in bases 5
 # and 7 rise together for the first 5 passes (4 passes: all on one diagonal
@@ -52,18 +52,6 @@ def concentric_disc(a, b):
     else:
         r, phi = y, np.pi / 2 - (np.pi / 4) * (x / y)
     return r * np.cos(phi), r * np.sin(phi)
-
-
-def radical_inverse(i: int, base: int, scramble: int = 1) -> float:
-    """i's digits in `base` mirrored about the point: 0, 1/b, 2/b, ..., 1/b^2, ...;
-    each digit d taken as (scramble d) mod base (a permutation when scramble
-    and base are coprime)."""
-    f, inv = 0.0, 1.0 / base
-    while i:
-        f += inv * (scramble * (i % base) % base)
-        i //= base
-        inv /= base
-    return f
 
 
 def ranks(values) -> np.ndarray:
