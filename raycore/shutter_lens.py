@@ -31,6 +31,8 @@ tracing (Cook, Porter and Carpenter 1984) do:
 Lens points go to the unit disc by Shirley and Chiu's concentric map,
 which keeps the strata's areas and shapes.
 """
+from functools import lru_cache
+
 import numpy as np
 
 from .sampling import nested_before_cap, radical_inverse
@@ -59,15 +61,17 @@ def ranks(values) -> np.ndarray:
     return np.argsort(np.argsort(values, kind="stable"), kind="stable")
 
 
-def plain_times_lens(n: int) -> list:
+@lru_cache(maxsize=None)
+def plain_times_lens(n: int) -> tuple:
     """(time, lens_x, lens_y) of the n passes of plain `--spp n`: time in
     [0, 1] across the shutter, lens on the unit disc; one pass: the
-    shutter's middle and the lens centre."""
+    shutter's middle and the lens centre. Made once per n (3 ms at 1024
+    passes, asked for every frame)."""
     if n <= 1:
-        return [(0.5, 0.0, 0.0)]
+        return ((0.5, 0.0, 0.0),)
     time, lens_a, lens_b = ((ranks([radical_inverse(i, base, scramble) for i in range(n)]) + 0.5) / n
                             for base, scramble in ((3, 1), (5, 1), (7, LENS_Y_SCRAMBLE)))
-    return [(float(t), *concentric_disc(float(a), float(b))) for t, a, b in zip(time, lens_a, lens_b)]
+    return tuple((float(t), *concentric_disc(float(a), float(b))) for t, a, b in zip(time, lens_a, lens_b))
 
 
 def nested_time_lens(i: int) -> tuple:
@@ -77,7 +81,8 @@ def nested_time_lens(i: int) -> tuple:
     return (shifted(3), *concentric_disc(shifted(5), shifted(7)))
 
 
-def budget_times_lens(cap: int) -> list:
+@lru_cache(maxsize=None)
+def budget_times_lens(cap: int) -> tuple:
     """(time, lens_x, lens_y) of each of sampling.budget_offsets(cap): the
     nested samples', then plain `--spp cap`'s."""
-    return [nested_time_lens(i) for i in range(nested_before_cap(cap))] + plain_times_lens(cap)
+    return tuple(nested_time_lens(i) for i in range(nested_before_cap(cap))) + plain_times_lens(cap)

@@ -69,7 +69,7 @@ def test_the_sample_patterns_are_stratified_in_time_and_on_the_lens():
         tl = np.array(plain_times_lens(n))
         assert sorted(np.floor(tl[:, 0] * n).astype(int)) == list(range(n))
         assert np.all(np.hypot(tl[:, 1], tl[:, 2]) <= 1 + 1e-12)
-    assert plain_times_lens(1) == [(0.5, 0.0, 0.0)]
+    assert plain_times_lens(1) == ((0.5, 0.0, 0.0),)
     # at a pixel centre an edge covering it for the share s of the shutter
     # (from time 1 - s on) is seen by a share of the passes within 1/n of s
     for n in (3, 16, 100):
