@@ -417,13 +417,17 @@ def refine_pixels(rgba, z, cfg, scene, buffers, gather, shade_surface, count_cam
             k += n_hit
         return out
 
+    def sample_of(offset):
+        """(time, lens_x, lens_y) of an offset (jx, jy[, time, lens_x, lens_y])."""
+        return tuple(offset[2:]) or centre
+
     def trace_passes(pixels, offsets, aov=True):
         out, i = [], 0
         while i < len(offsets):
             # the run of offsets that share a time and lens position
-            sample = tuple(offsets[i][2:]) or centre
+            sample = sample_of(offsets[i])
             end = i + 1
-            while end < len(offsets) and (tuple(offsets[end][2:]) or centre) == sample:
+            while end < len(offsets) and sample_of(offsets[end]) == sample:
                 end += 1
             scene.move_to(sample)
             out += trace_group(pixels, [o[:2] for o in offsets[i:end]], aov)
