@@ -37,19 +37,25 @@ def tri_verts_of(vertices, faces):
     return np.ascontiguousarray(vertices[faces].reshape(-1, 9), np.float32)
 
 
+# where the session's cold start leaves its render (tests/test_wheel.py checks it)
+COLD_START = ROOT / ".pytest_cache" / "cold_start"
+
+
 def pytest_sessionstart(session):
     """On a cold numba cache, compile the demo's kernels once before the
     xdist workers start: else every worker compiles the same kernels at the
     same time. The render uses the two-process cold compile
-    (anim/render/compile_helper.py)."""
+    (anim/render/compile_helper.py); its frames and stats.json stay in
+    COLD_START for the test of that compile (removed when the cache is warm)."""
     if hasattr(session.config, "workerinput"):        # an xdist worker: the controller did it
         return
+    import shutil
+    shutil.rmtree(COLD_START, ignore_errors=True)
     from anim.render import compile_helper
     if not compile_helper.wanted():
         return
     import subprocess
-    import tempfile
-    with tempfile.TemporaryDirectory() as out:
-        subprocess.run([sys.executable, "-m", "cli.main", "render", str(ROOT / "anim/builtin/demo/anim.yaml"),
-                        "-o", out, "--frames", "0:1", "--res", "64x64", "-q"], cwd=ROOT, check=False,
-                       capture_output=True)
+    COLD_START.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([sys.executable, "-m", "cli.main", "render", str(ROOT / "anim/builtin/demo/anim.yaml"),
+                    "-o", str(COLD_START), "--frames", "0:1", "--res", "64x64", "-q"], cwd=ROOT, check=False,
+                   capture_output=True)
