@@ -10,10 +10,8 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 
-# --no-compile: pip would byte-compile every file of every dependency (scipy, matplotlib,
-# dask, usd-core: 11 of 26 s here); Python compiles the few modules a run imports on first use
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install -q --no-compile -e ".[test]"
+	$(PY) -m pip install -q -e ".[test]"
 	touch $(STAMP)
 
 install: $(STAMP)
