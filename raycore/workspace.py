@@ -5,6 +5,8 @@ is written (the kernel zero-fills it): ~25 ms per frame for the ~100 MB that
 the surface, shadow and shading passes use at 1024^2. A Workspace hands out
 C-contiguous views of buffers it keeps, grown when a frame needs more.
 """
+from math import prod
+
 import numpy as np
 
 
@@ -17,8 +19,10 @@ class Workspace:
         handed out again for `name` on the next call (never two live uses).
         A new buffer holds at least `capacity` elements, so that a count that
         grows from frame to frame (visible pixels) does not reallocate."""
-        shape = tuple(int(s) for s in np.atleast_1d(shape))
-        size = int(np.prod(shape))
+        # plain Python here: a pass takes a dozen arrays, and numpy's
+        # atleast_1d/prod cost 9 us a call (small images, many passes)
+        shape = tuple(map(int, shape)) if isinstance(shape, (tuple, list)) else (int(shape),)
+        size = prod(shape)
         dtype = np.dtype(dtype)
         buf = self._buffers.get(name)
         if buf is None or buf.dtype != dtype or buf.size < size:

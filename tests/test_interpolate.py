@@ -54,6 +54,21 @@ def test_eval_into_matches_the_reference_evaluation(rng):
             assert np.array_equal(out, curve(t).astype(np.float32))
 
 
+@pytest.mark.parametrize("extrapolate", ["clamp", "loop"])
+def test_sample_equals_calling_at_each_time(rng, extrapolate):
+    """The error studies' vectorised evaluation against the per-call one:
+    random times, every key, a hair either side of each, and outside the keys."""
+    times = np.cumsum(rng.random(7) + 0.2)
+    values = rng.normal(size=(7, 4, 3)) * 1e3
+    eps = 1e-12
+    ts = np.concatenate([rng.uniform(times[0] - 3, times[-1] + 3, 200), times, times - eps, times + eps])
+    for method in METHODS:
+        curve = Curve(times, values, method, extrapolate)
+        assert np.array_equal(curve.sample(ts), np.stack([curve(t) for t in ts])), method
+    one = Curve([1.0], [[1.0, 2.0]], "cubic")
+    assert np.array_equal(one.sample([0.0, 5.0]), [[1.0, 2.0], [1.0, 2.0]])
+
+
 def _sinusoids(rng, n=20):
     a = rng.normal(size=(n, 3))
     w = rng.uniform(1, 3, size=(n, 3))

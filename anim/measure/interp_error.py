@@ -99,7 +99,7 @@ def bounce_overshoot(methods=METHODS, keys_per_second=(8, 16, 32), n_bounces=4):
         values = bounce_height(times, n_bounces)[:, None]
         for method in methods:
             curve = Curve(times, values, method)
-            y = np.array([curve(t)[0] for t in ts])
+            y = curve.sample(ts)[:, 0]
             rows.append({"method": method, "keys_per_second": k, "min_height": float(y.min()),
                          "max_err": float(np.abs(y - bounce_height(ts, n_bounces)).max())})
     return rows
