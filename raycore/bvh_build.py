@@ -137,25 +137,11 @@ def _bin_scale(ext):
 
 @helper
 def _span(bounds, centroids, s, e, out, row):
-    """out[row] = the box (6) and the centroids' bounds (6) of primitives s..e-1."""
-    lo0 = lo1 = lo2 = c_lo0 = c_lo1 = c_lo2 = np.float32(np.inf)
-    hi0 = hi1 = hi2 = c_hi0 = c_hi1 = c_hi2 = np.float32(-np.inf)
+    """out[row] = the box (6) and the centroids' bounds (6) of primitives s..e-1
+    (the root's, and the children of a split by count)."""
+    _empty_span(out, row)
     for k in range(s, e):
-        lo0 = min(lo0, bounds[k, 0])
-        lo1 = min(lo1, bounds[k, 1])
-        lo2 = min(lo2, bounds[k, 2])
-        hi0 = max(hi0, bounds[k, 3])
-        hi1 = max(hi1, bounds[k, 4])
-        hi2 = max(hi2, bounds[k, 5])
-        c_lo0 = min(c_lo0, centroids[k, 0])
-        c_lo1 = min(c_lo1, centroids[k, 1])
-        c_lo2 = min(c_lo2, centroids[k, 2])
-        c_hi0 = max(c_hi0, centroids[k, 0])
-        c_hi1 = max(c_hi1, centroids[k, 1])
-        c_hi2 = max(c_hi2, centroids[k, 2])
-    out[row, 0], out[row, 1], out[row, 2], out[row, 3], out[row, 4], out[row, 5] = lo0, lo1, lo2, hi0, hi1, hi2
-    out[row, 6], out[row, 7], out[row, 8] = c_lo0, c_lo1, c_lo2
-    out[row, 9], out[row, 10], out[row, 11] = c_hi0, c_hi1, c_hi2
+        _add_to_span(bounds, centroids, k, out, row)
 
 
 @helper
