@@ -369,11 +369,33 @@ def test_refit_boxes_are_tight_and_its_cost_is_the_trees(rng):
     tv = tv0 + np.float32(0.05) * rng.normal(size=tv0.shape).astype(np.float32)
     trees.update(tv)
     assert trees.stats["bvh_rebuilt"] == 0
+    _assert_tight(trees, tv)
+    # corners that are not finite are left out of a leaf's box, as in the
+    # build (refit checks for them once a leaf and boxes such a leaf again)
+    odd = tv.copy()
+    hit = rng.choice(3080, 60, replace=False)
+    odd[hit, rng.integers(0, 9, 60)] = np.float32(np.inf)
+    odd[hit[:20], 4] = np.float32(np.nan)
+    odd[hit[:10], 0] = np.float32(-np.inf)
+    odd[hit[30], :] = np.float32(np.nan)                    # no finite corner: an empty box
+    trees.update(odd)
+    assert trees.stats["bvh_rebuilt"] == 0
+    _assert_tight(trees, odd)
+    assert np.array_equal(b.verts[:3080], odd[b.tri[:3080]], equal_nan=True)
+
+
+def _assert_tight(trees, tv):
+    """Every used node's box is its finite corners' (a leaf) or its
+    children's (inner) union, and each tree's cost is sah_cost's."""
+    b = trees.bvh
     for g, n0 in enumerate(trees.node_lo[:3]):
         for i in range(int(n0), int(n0) + int(trees.used[g])):
             if b.count[i] > 0:
                 corners = tv[b.tri[b.child[i]:b.child[i] + b.count[i]]].reshape(-1, 3)
-                np.testing.assert_array_equal(b.box[i], np.r_[corners.min(0), corners.max(0)])
+                finite = np.isfinite(corners)
+                lo = np.where(finite, corners, np.inf).min(0)
+                hi = np.where(finite, corners, -np.inf).max(0)
+                np.testing.assert_array_equal(b.box[i], np.r_[lo, hi].astype(np.float32))
             else:
                 c = b.child[i]
                 np.testing.assert_array_equal(b.box[i], np.r_[np.minimum(b.box[c, :3], b.box[c + 1, :3]),
