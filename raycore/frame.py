@@ -348,7 +348,7 @@ def build_structures(names, geom, cfg, scene_grid, buffers, counters):
         built["kdtree"] = KdAccel(tree, tri_verts)
     if "bvh" in names:
         trees = scene_grid.scene_bvh()
-        built["bvh"] = BvhAccel(trees.update(tri_verts), tri_verts, buffers.work)
+        built["bvh"] = BvhAccel(trees.update(tri_verts, geom.vertices), tri_verts, buffers.work)
         counters.update(trees.stats)
     return tri_verts, built
 

@@ -38,9 +38,11 @@ REBUILD_GROWTH = 1.3
 
 class SceneBvh:
     """groups: one int32 array of triangle ids per tree; moving[g] says whether
-    tree g must follow the vertices every frame."""
+    tree g must follow the vertices every frame; faces (n_tris, 3): the
+    mesh's vertex ids of each triangle (None: a soup, triangle t's corners
+    are vertices 3t..3t+2 of tri_verts read as (3n, 3))."""
 
-    def __init__(self, n_tris, groups, moving):
+    def __init__(self, n_tris, groups, moving, faces=None):
         kept = [(np.ascontiguousarray(g, np.int32), bool(m)) for g, m in zip(groups, moving) if len(g)]
         self.groups = [g for g, _ in kept]
         self.moving = [m for _, m in kept]
@@ -55,6 +57,9 @@ class SceneBvh:
             node += 2 * len(tris)
             ref += len(tris)
         self.bvh = empty_bvh(node, ref)
+        self.faces = (np.arange(3 * n_tris, dtype=np.int32).reshape(n_tris, 3) if faces is None
+                      else np.ascontiguousarray(faces, np.int32))
+        self.leaf_faces = np.zeros((ref, 3), np.int32)     # the faces of bvh.tri, for the refit
         self.built_cost = np.zeros(n_groups, np.float32)
         self.cost = np.zeros(n_groups, np.float32)
         self.first = True
@@ -74,10 +79,11 @@ class SceneBvh:
         self.part = np.empty(n_moving * REFIT_PIECES)
 
     @classmethod
-    def of_objects(cls, n_tris, object_ranges=None, moving_tris=None):
+    def of_objects(cls, n_tris, object_ranges=None, moving_tris=None, faces=None):
         """Trees for a scene: object_ranges (start, end) face ranges of the
         moving objects, one tree each; every other triangle in one static
-        tree. Without object_ranges, moving_tris (None: all) are one tree."""
+        tree. Without object_ranges, moving_tris (None: all) are one tree.
+        faces: as in SceneBvh."""
         is_moving = np.zeros(n_tris, bool)
         groups, moving = [], []
         if object_ranges is not None:
@@ -92,7 +98,7 @@ class SceneBvh:
             is_moving[ids] = True
         groups.append(np.nonzero(~is_moving)[0].astype(np.int32))
         moving.append(False)
-        return cls(n_tris, groups, moving)
+        return cls(n_tris, groups, moving, faces)
 
     def _build(self, tri_verts, g):
         """Build tree g into its region from this frame's triangle corners."""
@@ -112,6 +118,7 @@ class SceneBvh:
         b.count[n0 + used:n0 + 2 * m] = 0
         b.tri[r0:r0 + m] = tris[order]
         b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
+        self.leaf_faces[r0:r0 + m] = self.faces[b.tri[r0:r0 + m]]
         self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
         self.used[g] = used
         if self.moving[g]:
@@ -129,8 +136,9 @@ class SceneBvh:
             self._build(tri_verts, g)
         self.first = False
 
-    def update(self, tri_verts) -> Bvh:
-        """The tree of this frame's triangle corners tri_verts (n, 9)."""
+    def update(self, tri_verts, vertices=None) -> Bvh:
+        """The tree of this frame's triangle corners tri_verts (n, 9), which
+        are vertices[faces] (vertices None: a soup, see SceneBvh)."""
         t0 = time.perf_counter()
         n_built = 0
         if self.first:
@@ -144,8 +152,9 @@ class SceneBvh:
             if len(idx):
                 b = self.bvh
                 cost = np.empty(len(idx), np.float32)
-                refit(tri_verts, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
-                      self.node_lo[idx], b.node, b.node_i, b.tri, b.verts, self.part, cost)
+                points = tri_verts.reshape(-1, 3) if vertices is None else np.ascontiguousarray(vertices, np.float32)
+                refit(points, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
+                      self.node_lo[idx], b.node, b.node_i, self.leaf_faces, b.verts, self.part, cost)
                 self.cost[idx] = cost
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0

@@ -62,7 +62,7 @@ class SceneGrid:
     def scene_bvh(self):
         """The scene's BVH trees (made on first use, kept across frames)."""
         if self.bvh is None:
-            self.bvh = SceneBvh.of_objects(self.faces.shape[0], self.object_ranges, self.moving_tris)
+            self.bvh = SceneBvh.of_objects(self.faces.shape[0], self.object_ranges, self.moving_tris, self.faces)
         return self.bvh
 
     @property
