@@ -1,7 +1,8 @@
 """One place for numba presets, the threading layer and the atomic tile counter.
 
 Why these flags:
-* `cache=True` so a second run loads machine code instead of compiling (~15 s -> ~0.2 s).
+* `cache=True` so a second run loads machine code instead of compiling (~15 s -> ~0.2 s);
+  kernel_cache.py makes an edit to any kernel source recompile every kernel.
 * `nogil=True` so the EXR writer thread runs while kernels render.
 * `error_model="numpy"`: division by zero gives inf/NaN instead of raising; the
   ray kernels rely on IEEE semantics (1/0 = inf) and must not branch on it.
@@ -13,6 +14,8 @@ import numba
 from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
+
+from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
 
 # OpenMP measured faster than the default workqueue on this machine kind.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
