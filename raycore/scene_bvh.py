@@ -57,6 +57,7 @@ class SceneBvh:
             node += 2 * len(tris)
             ref += len(tris)
         self.bvh = empty_bvh(node, ref)
+        self.soup = faces is None
         self.faces = (np.arange(3 * n_tris, dtype=np.int32).reshape(n_tris, 3) if faces is None
                       else np.ascontiguousarray(faces, np.int32))
         self.leaf_faces = np.zeros((ref, 3), np.int32)     # the faces of bvh.tri, for the refit
@@ -152,7 +153,12 @@ class SceneBvh:
             if len(idx):
                 b = self.bvh
                 cost = np.empty(len(idx), np.float32)
-                points = tri_verts.reshape(-1, 3) if vertices is None else np.ascontiguousarray(vertices, np.float32)
+                if self.soup:
+                    points = tri_verts.reshape(-1, 3)
+                elif vertices is None:
+                    raise ValueError("a SceneBvh made with faces refits from the vertices: pass them")
+                else:
+                    points = np.ascontiguousarray(vertices, np.float32)
                 refit(points, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
                       self.node_lo[idx], b.node, b.node_i, self.leaf_faces, b.verts, self.part, cost)
                 self.cost[idx] = cost

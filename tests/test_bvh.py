@@ -166,6 +166,31 @@ def test_refit_follows_deforming_and_rigid_motion(rng):
         _agree(bvh_trace_rays(bvh, o, d, mode=SHARED_ORIGIN), want, tv)
 
 
+def test_a_mesh_refits_from_its_shared_vertices_as_a_soup_does(rng):
+    """A mesh's trees refit from its vertex array through each reference's
+    faces (SceneBvh(faces=...), as a render does): boxes, leaf-order corners
+    and SAH costs equal those of the same triangles refit as a soup, bit for
+    bit, over a deforming icosphere with a moving second copy; and a tree
+    made with faces refuses a refit without the vertices."""
+    v0, f = icosphere_mesh(3)
+    faces = np.concatenate([f, f + len(v0)])
+    n = len(faces)
+    mesh = SceneBvh.of_objects(n, [(0, len(f)), (len(f), n)], faces=faces)
+    as_soup = SceneBvh.of_objects(n, [(0, len(f)), (len(f), n)])
+    for step in range(4):
+        bend = np.float32(1) + np.float32(0.2) * np.sin(step + 3 * v0[:, :1]).astype(np.float32)
+        vertices = np.ascontiguousarray(np.concatenate([v0 * bend, v0 + np.float32(0.5 * step)]), np.float32)
+        tv = tri_verts_of(vertices, faces)
+        a, b = mesh.update(tv, vertices), as_soup.update(tv)
+        assert mesh.stats["bvh_rebuilt"] == as_soup.stats["bvh_rebuilt"] == (2 if step == 0 else 0)   # refits after the first
+        np.testing.assert_array_equal(a.node.view(np.int32), b.node.view(np.int32))
+        np.testing.assert_array_equal(a.verts, b.verts)
+        np.testing.assert_array_equal(mesh.cost, as_soup.cost)
+        np.testing.assert_array_equal(a.verts, tv[a.tri])
+    with pytest.raises(ValueError, match="vertices"):
+        mesh.update(tv)
+
+
 def test_a_tree_whose_parts_scatter_is_rebuilt(rng):
     """Triangles that swap places make a refit tree's boxes overlap: its SAH
     cost grows past REBUILD_GROWTH and the next update rebuilds it, after
