@@ -66,6 +66,8 @@ class SceneBvh:
         self.first = True
         self.stats = {}
         self._moving_idx = np.array([g for g in range(n_groups) if self.moving[g]], np.int64)
+        self._moving_roots = np.ascontiguousarray(self.node_lo[self._moving_idx])
+        self._moving_cost = np.empty(len(self._moving_idx), np.float32)
         self.used = np.zeros(n_groups, np.int64)     # nodes each tree's build used
         # the moving trees' refit plans (bvh_build.refit_plan) in fixed slots,
         # REFIT_PIECES pieces and REFIT_PIECES - 1 top nodes a tree (-1: unused),
@@ -152,7 +154,7 @@ class SceneBvh:
             idx = self._moving_idx
             if len(idx):
                 b = self.bvh
-                cost = np.empty(len(idx), np.float32)
+                cost = self._moving_cost
                 if self.soup:
                     points = tri_verts.reshape(-1, 3)
                 elif vertices is None:
@@ -160,7 +162,7 @@ class SceneBvh:
                 else:
                     points = np.ascontiguousarray(vertices, np.float32)
                 refit(points, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
-                      self.node_lo[idx], b.node, b.node_i, self.leaf_faces, b.verts, self.part, cost)
+                      self._moving_roots, b.node, b.node_i, self.leaf_faces, b.verts, self.part, cost)
                 self.cost[idx] = cost
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0
