@@ -26,7 +26,6 @@ from numba.extending import intrinsic
 from ._jit import helper
 
 F1 = np.float32(1.0)
-F2 = np.float32(2.0)
 SQRT_HALF_BITS = np.int32(0x3F3504F3)       # the bits of sqrt(1/2)
 TWO_OVER_LN2 = np.float32(2.0 / np.log(2.0))
 LN2 = np.float32(np.log(2.0))

@@ -178,11 +178,13 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key,
     top_i = np.int32((1 << bits) - 1)
     for f in range(N_FACES):
         for a in range(2):
-            mn = -F1 if unit_keys else INF
-            mx = F1 if unit_keys else -INF
-            for c in range(0 if unit_keys else n_chunks):
-                mn = min(mn, lo[c, f, a])
-                mx = max(mx, hi[c, f, a])
+            if unit_keys:
+                mn, mx = -F1, F1
+            else:
+                mn, mx = INF, -INF
+                for c in range(n_chunks):
+                    mn = min(mn, lo[c, f, a])
+                    mx = max(mx, hi[c, f, a])
             f_lo[f, a] = mn
             f_scale[f, a] = top / (mx - mn) if mx > mn else F0
     # per chunk: keys in a branch-free loop (-1: inactive), then its row of
