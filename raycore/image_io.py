@@ -1,10 +1,12 @@
 """Image files at the edges: EXR frames out (OpenEXR), textures and previews
 through OpenImageIO.
 
-Frames are written by the official OpenEXR bindings: they take a float16
-array for R G B A and a float32 array for Z as they are, where OpenImageIO's
-Python binding converts every channel one value at a time (110-190 ms per
-1024^2 frame against ~25 ms here). Channels R G B A are half, Z and AOVs
+Frames in the zip and zips codecs (zip is the default) are encoded by
+exr_zip.py: the same codec, deflated by ISA-L instead of zlib, at a quarter
+of the CPU. The other codecs go through the official OpenEXR bindings: they
+take a float16 array for R G B A and a float32 array for Z as they are,
+where OpenImageIO's Python binding converts every channel one value at a
+time (110-190 ms per 1024^2 frame against ~25 ms with the bindings). Channels R G B A are half, Z and AOVs
 float32 (SPEC section 4). The file is written under a temporary name in the
 same directory and renamed, so a killed render never leaves a half-written
 frame behind.
@@ -15,6 +17,7 @@ import numpy as np
 import OpenEXR
 import OpenImageIO as oiio
 
+from . import exr_zip
 from .half_float import to_half
 
 HALF_CHANNELS = ("R", "G", "B", "A")
@@ -60,12 +63,21 @@ def write_exr(path: str, channels: dict, metadata: dict, compression: str = "zip
             pixels[name] = to_half(values)
         else:
             pixels[name] = np.ascontiguousarray(values, np.float32)
-    header = {"compression": getattr(OpenEXR, COMPRESSIONS[compression][0]),
-              "type": OpenEXR.scanlineimage, **metadata}
     tmp = temp_path(path)
     try:
-        with OpenEXR.File(header, pixels) as exr:
-            exr.write(tmp)
+        if compression in exr_zip.CODES:
+            # the same codec as OpenEXR's, deflated by ISA-L: 4x fewer core-ms (exr_zip.py)
+            planes = {}
+            for name, values in pixels.items():
+                planes.update({c: values[:, :, k] for k, c in enumerate(HALF_CHANNELS)} if name == "RGBA"
+                              else {name: values})
+            with open(tmp, "wb") as f:
+                f.writelines(exr_zip.encode(planes, metadata, compression))
+        else:
+            header = {"compression": getattr(OpenEXR, COMPRESSIONS[compression][0]),
+                      "type": OpenEXR.scanlineimage, **metadata}
+            with OpenEXR.File(header, pixels) as exr:
+                exr.write(tmp)
         os.replace(tmp, path)
     except RuntimeError as exc:          # the bindings raise RuntimeError on I/O errors
         raise OSError(f"{path}: {exc}") from None
