@@ -132,7 +132,7 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
     """Run two frames of the scene with made-up camera hits, made-up
     vertices (interpolation is the camera half's) and, for BVH shadows, a
     made-up tree (the builds are the camera half's, and so is the EXR
-    write). {kernel: s}."""
+    write's half-float conversion; its zip layout is this half's). {kernel: s}."""
     from anim.render.compile_watch import watching
     from anim.render.renderer import SceneRenderer
     from anim.render.settings import shading_of
@@ -155,6 +155,12 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
         for _ in range(2):        # the second frame takes the per-frame paths
             render_frame(geom, shading, pose, cfg, renderer.buffers, renderer.scene_grid,
                          camera_accel=camera_hits, shadow_accel=shadow_bvh)
+        # the zip codec's byte layout (the camera half has the longer compile)
+        from raycore.exr_zip import CODES, split_blocks
+        if scene.spec.output.compression in CODES:
+            planar = np.zeros(8, np.uint8)
+            split_blocks(planar, np.zeros(1, np.int64), np.full(1, 8, np.int64), 1, CODES["zip"][1],
+                         np.empty_like(planar))
     return watch.seconds()
 
 

@@ -11,6 +11,7 @@ from anim.scene import AnimatedScene
 from raycore.config import SHADOW_ACCEL, RenderConfig
 from raycore.camera import camera_basis
 from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_structures, render_frame
+from raycore.half_float import to_half
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
 from raycore.shade import write_pixels
@@ -104,9 +105,9 @@ def warm_up(scene, shading, cfg, t):
 
     On a cold cache a helper process compiles the surface half meanwhile
     (compile_helper.py): this process first compiles the camera half (with
-    the structures' builds and the image's scatter and EXR write, to even the
-    halves out), waits for the helper, and then loads its kernels from the
-    cache."""
+    the structures' builds, the image's scatter and the EXR write's half
+    floats, to even the halves out), waits for the helper, and then loads its
+    kernels (the zip layout among them) from the cache."""
     from . import compile_helper
     t0 = time.perf_counter()
     dt = 1.0 / scene.spec.frames.fps
@@ -122,8 +123,7 @@ def warm_up(scene, shading, cfg, t):
             rgba, z = renderer.buffers.image()
             write_pixels(np.zeros(0, np.int32), np.zeros((3, 0), np.float32), np.zeros(0, np.float32),
                          np.asarray(small.background, np.float32), np.float32(1.0), False, rgba, z)
-            _write_trial({"RGBA": rgba.reshape(small.height, small.width, 4),
-                          "Z": z.reshape(small.height, small.width)}, scene.spec.output.compression)
+            to_half(rgba)          # the write's zip layout is the helper's (it loads after)
             renderer.trace_camera_only(t)
             renderer.trace_camera_only(t + dt)
             done = True
