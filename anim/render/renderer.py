@@ -147,8 +147,11 @@ def _write_trial(channels, compression):
 
 # bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),
 # one light's shadow rays and their sort (52), shaded colour (12), the image
-# ring (2 x 20), the half-float copy and the EXR codec's buffers (~28)
-BYTES_PER_PIXEL = 16 + 96 + 52 + 12 + 40 + 28
+# ring (2 x 20), and the EXR write's buffers (52: half copy, the zip encoder's
+# three copies of the frame's bytes and its deflated blocks, measured with
+# tracemalloc on an incompressible 1024^2 RGBA + Z frame; the OpenEXR
+# bindings' codecs took 8)
+BYTES_PER_PIXEL = 16 + 96 + 52 + 12 + 40 + 52
 
 
 # an error budget's group of passes holds about one image's samples twice
