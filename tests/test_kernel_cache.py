@@ -56,7 +56,7 @@ def test_an_edit_to_any_kernel_source_changes_the_stamp_and_nothing_else_does(tm
         stamp = package_stamp(tmp_path)
         path.write_text(text)
         return stamp
-    assert edited("raycore/bvh_packets.py", "PACKET = 64", "PACKET = 128") != PACKAGE_STAMP
+    assert edited("raycore/bvh_packets.py", "PACKET = 128", "PACKET = 256") != PACKAGE_STAMP
     assert edited("raycore/config.py", "\n", "\n# edited\n") != PACKAGE_STAMP
     assert edited("anim/track_kernels.py", "\n", "\n# edited\n") != PACKAGE_STAMP
     assert edited("anim/scene.py", "\n", "\n# edited\n") == PACKAGE_STAMP
