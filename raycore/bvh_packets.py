@@ -50,9 +50,9 @@ EPS_PLANE = np.float32(1e-5)       # frustum planes loosened by this fraction of
 MIN_SHEAR_SHARE = np.float32(0.5)  # a packet's shear axis holds >= half of every ray's largest component
 # rays per packet: camera packets are 8x8 pixels; shadow packets of 128 rays
 # (consecutive in light-space order) were 4-13 % faster than 64 on all five
-# built-in scenes and both light kinds (32: 30 % slower; 256: the point
-# light's 15 % faster on hand, the directional one's no faster), measured in
-# one process on captured rays, interleaved, 2026-12-03
+# built-in scenes and both light kinds (32: 30 % slower), and 256 was 0-23 %
+# slower than 128 (runner 23 %, hand 11 %), measured in one process on
+# captured rays, interleaved, 2026-12-03
 PACKET = 128
 # rows of a packet's ray array (N_ROWS, PACKET), read-only while it walks;
 # PU, PV, PK: the origin permuted to the packet's axes, SU, SV, SZ: the
