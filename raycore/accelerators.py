@@ -9,7 +9,8 @@ structure once and never asks which one it has.
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
              shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py);
   BvhAccel   the per-frame BVH (refit trees per object under a top level,
-             scene_bvh.py): every kind of ray in packets of 64 that share an
+             scene_bvh.py): every kind of ray in packets (8x8 camera rays, 128
+             shadow or batch rays) that share an
              origin or a direction (bvh_packets.py, bvh_trace.py).
 
 Counters are named (counters.Counters): `visits` are grid cells or tree
