@@ -33,6 +33,7 @@ import numpy as np
 from numba import prange
 
 from ._jit import helper, kernel, parallel_kernel
+from .tile_queue import new_queue, next_tile
 
 N_BINS = 16
 # SAH constants: a node visit costs about as much as one ray/triangle test
@@ -173,20 +174,22 @@ def _empty_span(out, row):
         out[row, 3 + q] = out[row, 9 + q] = np.float32(-np.inf)
 
 
+# count of a node whose subtree is left to a task (build_region's top
+# phase); its child is the task's number
+DEFERRED = -4
+
+
 @kernel
-def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
-    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
-    node region starting at node0 (root there, children in pairs after it).
-    `order` (m,) receives the primitives in leaf order: leaf k's references
-    are order[child[k] - ref0 ...] for the caller's ref0 (the caller adds
-    its reference base to child of every leaf). Returns the nodes used.
-    bounds and centroids are reordered with `order` as the build partitions
-    them, so that every pass reads them in memory order (through `order`,
-    the reads scatter once the first splits have shuffled it)."""
-    m = bounds.shape[0]
-    for i in range(m):
-        order[i] = i
-    # stack rows: node, first primitive, end, depth
+def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, child, count, stop_n,
+                 task_s, task_e, task_d, task_span):
+    """Binned-SAH subtree over primitives s0..e0-1 (their box and centroid
+    bounds span0 (12,), at depth depth0) into the scratch nodes root, root + 1, ...
+    (children in pairs after their parent, in the order build_region lays
+    them out). A node of fewer than stop_n primitives is not split here:
+    it is marked DEFERRED and listed in task_* (first, end, depth, span),
+    for build_region's workers. Returns (one past the last node used, tasks).
+    bounds (m, 7): a primitive's box, then its number as int32 bits;
+    the partition moves its rows and the centroids' in place."""
     st_node = np.empty(STACK, np.int64)
     st_s = np.empty(STACK, np.int64)
     st_e = np.empty(STACK, np.int64)
@@ -194,14 +197,17 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
     # each row's box and centroid bounds, gathered by the parent's partition
     # as it moves the primitives (a pass of its own per node cost 4-8 %)
     st_span = np.empty((STACK, 12), np.float32)
-    st_node[0], st_s[0], st_e[0], st_d[0] = node0, 0, m, 1
-    _span(bounds, centroids, 0, m, st_span, 0)
+    st_node[0], st_s[0], st_e[0], st_d[0] = root, s0, e0, depth0
+    for q in range(12):
+        st_span[0, q] = span0[q]
     top = 1
-    alloc = node0 + 1
+    alloc = root + 1
+    n_tasks = 0
     # bins start empty and are left empty: a node clears only those it filled
     bin_n = np.ones((3, N_BINS), np.int64)       # all "filled", so that the next line clears all
     bin_box = np.empty((3, N_BINS, 6), np.float32)
     _clear_bins(bin_n, bin_box)
+    nonempty = np.empty(N_BINS, np.int64)     # an axis's bins that hold primitives
     r_area = np.empty(N_BINS, np.float32)
     r_n = np.empty(N_BINS, np.int64)
     spans = np.empty((2, 12), np.float32)     # the two children's, while partitioning
@@ -216,6 +222,14 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                                                     st_span[top, 9], st_span[top, 10], st_span[top, 11])
         box[node, 0], box[node, 1], box[node, 2] = lo0, lo1, lo2
         box[node, 3], box[node, 4], box[node, 5] = hi0, hi1, hi2
+        if n < stop_n:
+            child[node] = n_tasks
+            count[node] = DEFERRED
+            task_s[n_tasks], task_e[n_tasks], task_d[n_tasks] = s, e, depth
+            for q in range(12):
+                task_span[n_tasks, q] = st_span[top, q]
+            n_tasks += 1
+            continue
         c_lo = (c_lo0, c_lo1, c_lo2)
         ext = (c_hi0 - c_lo0, c_hi1 - c_lo1, c_hi2 - c_lo2)
         best_cost = np.float32(np.inf)
@@ -236,27 +250,35 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
             for a in range(3):
                 if scale[a] == 0:
                     continue
-                # right-to-left sweep: area and count of bins b..N_BINS-1
-                x0 = y0 = z0 = np.float32(np.inf)
-                x1 = y1 = z1 = np.float32(-np.inf)
-                cnt = 0
-                for b in range(N_BINS - 1, 0, -1):
-                    if bin_n[a, b] > 0:                # an empty bin's box is empty
-                        cnt += bin_n[a, b]
-                        x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
-                    r_n[b] = cnt
-                    r_area[b] = _area(x0, y0, z0, x1, y1, z1) if cnt > 0 else np.float32(0.0)
-                x0 = y0 = z0 = np.float32(np.inf)
-                x1 = y1 = z1 = np.float32(-np.inf)
-                cnt = 0
-                for b in range(N_BINS - 1):
+                # the sweeps run over the bins that hold primitives only (a
+                # small node fills few of the 16): the plane after bin
+                # nonempty[j] is the first of the planes up to the next full
+                # bin, which all cost the same, so the tree is the one a
+                # sweep over every bin makes (with a third of the build's time)
+                k_full = 0
+                for b in range(N_BINS):
                     if bin_n[a, b] > 0:
-                        cnt += bin_n[a, b]
-                        x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
-                    if cnt == 0 or r_n[b + 1] == 0:
-                        continue
+                        nonempty[k_full] = b
+                        k_full += 1
+                # right-to-left sweep: area and count of the full bins j..
+                x0 = y0 = z0 = np.float32(np.inf)
+                x1 = y1 = z1 = np.float32(-np.inf)
+                cnt = 0
+                for j in range(k_full - 1, 0, -1):
+                    b = nonempty[j]
+                    cnt += bin_n[a, b]
+                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
+                    r_n[j] = cnt
+                    r_area[j] = _area(x0, y0, z0, x1, y1, z1)
+                x0 = y0 = z0 = np.float32(np.inf)
+                x1 = y1 = z1 = np.float32(-np.inf)
+                cnt = 0
+                for j in range(k_full - 1):
+                    b = nonempty[j]
+                    cnt += bin_n[a, b]
+                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
                     cost = (_area(x0, y0, z0, x1, y1, z1) * np.float32(cnt)
-                            + r_area[b + 1] * np.float32(r_n[b + 1]))
+                            + r_area[j + 1] * np.float32(r_n[j + 1]))
                     if cost < best_cost:
                         best_cost, best_axis, best_bin = cost, a, b
             _clear_bins(bin_n, bin_box)
@@ -283,8 +305,7 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
                     _add_to_span(bounds, centroids, i, spans, 0)
                     i += 1
                 else:
-                    order[i], order[j] = order[j], order[i]
-                    for q in range(6):
+                    for q in range(7):               # the box and, in column 6, the primitive
                         bounds[i, q], bounds[j, q] = bounds[j, q], bounds[i, q]
                     for q in range(3):
                         centroids[i, q], centroids[j, q] = centroids[j, q], centroids[i, q]
@@ -308,7 +329,99 @@ def build_region(bounds, centroids, max_leaf, node0, box, child, count, order):
         st_node[top + 1], st_s[top + 1], st_e[top + 1], st_d[top + 1] = alloc, s, mid, depth + 1
         top += 2
         alloc += 2
+    return alloc, n_tasks
+
+
+@kernel
+def _relayout(s_box, s_child, s_count, task_root, node0, box, child, count):
+    """The scratch tree (root 0, DEFERRED nodes continued at their task's
+    root) copied into box, child, count from node0 in depth-first order,
+    children in pairs, left subtree first: the layout a single pass of
+    _build_nodes makes, which refit_plan relies on. Returns the nodes used."""
+    st_src = np.empty(STACK, np.int64)
+    st_dst = np.empty(STACK, np.int64)
+    st_src[0], st_dst[0] = 0, node0
+    top = 1
+    alloc = node0 + 1
+    while top > 0:
+        top -= 1
+        src, dst = st_src[top], st_dst[top]
+        if s_count[src] == DEFERRED:
+            src = task_root[s_child[src]]
+        for q in range(6):
+            box[dst, q] = s_box[src, q]
+        c = s_count[src]
+        count[dst] = c
+        if c > 0:
+            child[dst] = s_child[src]
+            continue
+        child[dst] = alloc
+        st_src[top], st_dst[top] = s_child[src] + 1, alloc + 1
+        st_src[top + 1], st_dst[top + 1] = s_child[src], alloc
+        top += 2
+        alloc += 2
     return alloc - node0
+
+
+# build_region's top phase splits nodes down to about 1 / TASKS_PER_TREE
+# of the primitives; the subtrees below are built by all threads, pulled
+# from a queue (many more than threads, so the load balances)
+TASKS_PER_TREE = 16
+MIN_TASK = 256
+
+
+@parallel_kernel
+def build_region(bounds, centroids, max_leaf, node0, box, child, count, order, n_workers):
+    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
+    node region starting at node0 (root there, children in pairs after it).
+    `order` (m,) receives the primitives in leaf order: leaf k's references
+    are order[child[k] - ref0 ...] for the caller's ref0 (the caller adds
+    its reference base to child of every leaf). Returns the nodes used.
+    centroids are reordered as the build partitions them (bounds go
+    with a copy), so that every pass reads them in memory order.
+
+    The nodes above ~m / TASKS_PER_TREE primitives are split on one thread;
+    the subtrees below them by n_workers threads into disjoint scratch
+    regions; then one pass lays the nodes out in the order of a single
+    serial pass, so the tree does not depend on the thread count (nor on
+    whether it was built in parallel at all)."""
+    m = bounds.shape[0]
+    # a primitive's number travels with its box (column 6, as an int32 view)
+    boxed = np.empty((m, 7), np.float32)
+    boxed_i = boxed.view(np.int32)
+    for i in range(m):
+        for q in range(6):
+            boxed[i, q] = bounds[i, q]
+        boxed_i[i, 6] = i
+    span0 = np.empty((1, 12), np.float32)
+    _span(bounds, centroids, 0, m, span0, 0)
+    # a binary tree over m primitives has at most 2m - 1 nodes: the top
+    # phase's, then each task's at 2 x its first primitive past them
+    n_scratch = 4 * m + 1
+    s_box = np.empty((n_scratch, 6), np.float32)
+    s_child = np.empty(n_scratch, np.int64)
+    s_count = np.empty(n_scratch, np.int64)
+    task_s = np.empty(m + 1, np.int64)
+    task_e = np.empty(m + 1, np.int64)
+    task_d = np.empty(m + 1, np.int64)
+    task_span = np.empty((m + 1, 12), np.float32)
+    stop_n = max(m // TASKS_PER_TREE, MIN_TASK) if n_workers > 1 else 0
+    top_end, n_tasks = _build_nodes(boxed, centroids, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count,
+                                    stop_n, task_s, task_e, task_d, task_span)
+    task_root = np.empty(n_tasks, np.int64)
+    for t in range(n_tasks):
+        task_root[t] = top_end + 2 * task_s[t]
+    queue = new_queue()
+    for _w in prange(n_workers):
+        while True:
+            t = next_tile(queue, n_tasks)
+            if t < 0:
+                break
+            _build_nodes(boxed, centroids, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
+                         task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
+    for i in range(m):
+        order[i] = boxed_i[i, 6]
+    return _relayout(s_box, s_child, s_count, task_root, node0, box, child, count)
 
 
 @kernel

@@ -20,6 +20,7 @@ node, so a traversal sees one tree and never asks which part it is in.
 """
 import time
 
+import numba
 import numpy as np
 
 from .bvh_build import MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, prim_bounds, refit, refit_plan, sah_cost
@@ -113,7 +114,8 @@ class SceneBvh:
         order = np.empty(m, np.int32)
         b = self.bvh
         n0, r0 = int(self.node_lo[g]), int(self.ref_lo[g])
-        used = build_region(bounds, centroids, MAX_LEAF, n0, b.box, b.child, b.count, order)
+        used = build_region(bounds, centroids, MAX_LEAF, n0, b.box, b.child, b.count, order,
+                            numba.get_num_threads())
         region = slice(n0, n0 + 2 * m)
         leaves = b.count[region] > 0
         b.child[region][leaves] += r0
@@ -195,7 +197,7 @@ class SceneBvh:
         centroids = np.where(bounds[:, :3] <= bounds[:, 3:], 0.5 * (bounds[:, :3] + bounds[:, 3:]), 0.0)
         order = np.empty(n_groups, np.int32)
         used = build_region(bounds, np.ascontiguousarray(centroids, np.float32), 1, 0, b.box, b.child,
-                            b.count, order)
+                            b.count, order, 1)
         b.child[used:self.top_nodes] = -1
         b.count[used:self.top_nodes] = 0
         leaves = np.nonzero(b.count[:used] > 0)[0]
