@@ -26,6 +26,7 @@ frame (boxes recomputed bottom-up, nodes in reverse order since children
 always follow their parent) and rebuilt only when its SAH cost has grown
 past a threshold measured against the cost at its last build.
 """
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -33,7 +34,6 @@ import numpy as np
 from numba import prange
 
 from ._jit import helper, kernel, parallel_kernel
-from .tile_queue import new_queue, next_tile
 
 N_BINS = 16
 # SAH constants: a node visit costs about as much as one ray/triangle test
@@ -84,12 +84,14 @@ def empty_bvh(n_nodes, n_refs) -> Bvh:
     return Bvh(node, node_i, np.zeros(n_refs, np.int32), np.zeros((n_refs, 9), np.float32))
 
 
-@parallel_kernel
+@kernel
 def prim_bounds(tri_verts, tris, bounds, centroids):
     """Box (6) and centroid (3) of each triangle tris[k] of tri_verts. A
     corner that is not finite is left out of the box (the grid does the
-    same); a triangle with no finite corner gets an empty box."""
-    for k in prange(tris.shape[0]):
+    same); a triangle with no finite corner gets an empty box. On one
+    thread: the OpenMP threads of a parallel loop spin for a while after
+    it, and took a core from the build's threads that follow (1-2 ms on hand)."""
+    for k in range(tris.shape[0]):
         t = tris[k]
         for a in range(3):
             lo = np.float32(np.inf)
@@ -333,16 +335,19 @@ def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, 
 
 
 @kernel
-def _relayout(s_box, s_child, s_count, task_root, node0, box, child, count):
+def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count):
     """The scratch tree (root 0, DEFERRED nodes continued at their task's
-    root) copied into box, child, count from node0 in depth-first order,
+    root) copied into box, child, count from node0 (leaves' references
+    from ref0) in depth-first order,
     children in pairs, left subtree first: the layout a single pass of
-    _build_nodes makes, which refit_plan relies on. Returns the nodes used."""
+    _build_nodes makes, which refit_plan relies on. Returns the nodes used
+    and the tree's SAH cost (as sah_cost, summed on the way)."""
     st_src = np.empty(STACK, np.int64)
     st_dst = np.empty(STACK, np.int64)
     st_src[0], st_dst[0] = 0, node0
     top = 1
     alloc = node0 + 1
+    total = root_area = np.float64(0.0)
     while top > 0:
         top -= 1
         src, dst = st_src[top], st_dst[top]
@@ -352,76 +357,117 @@ def _relayout(s_box, s_child, s_count, task_root, node0, box, child, count):
             box[dst, q] = s_box[src, q]
         c = s_count[src]
         count[dst] = c
+        area = np.float64(_area(s_box[src, 0], s_box[src, 1], s_box[src, 2], s_box[src, 3], s_box[src, 4],
+                                s_box[src, 5]))
+        if dst == node0:
+            root_area = area
         if c > 0:
-            child[dst] = s_child[src]
+            total += area * np.float64(C_INTERSECT) * c
+            child[dst] = s_child[src] + ref0
             continue
+        total += area * np.float64(C_TRAVERSE)
         child[dst] = alloc
         st_src[top], st_dst[top] = s_child[src] + 1, alloc + 1
         st_src[top + 1], st_dst[top + 1] = s_child[src], alloc
         top += 2
         alloc += 2
-    return alloc - node0
+    return alloc - node0, np.float32(total / root_area) if root_area > 0 else np.float32(0.0)
 
 
 # build_region's top phase splits nodes down to about 1 / TASKS_PER_TREE
 # of the primitives; the subtrees below are built by all threads, pulled
-# from a queue (many more than threads, so the load balances)
+# from a queue (more tasks than threads, so the load balances)
 TASKS_PER_TREE = 16
 MIN_TASK = 256
 
+# the build's worker threads. Python threads, each calling the nogil
+# kernel _build_nodes: as a numba parallel kernel (prange over a task
+# queue) the build compiled in 11 s instead of 4, its big loop optimized
+# again inside the parallel region
+_POOL = None
 
-@parallel_kernel
-def build_region(bounds, centroids, max_leaf, node0, box, child, count, order, n_workers):
-    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
-    node region starting at node0 (root there, children in pairs after it).
-    `order` (m,) receives the primitives in leaf order: leaf k's references
-    are order[child[k] - ref0 ...] for the caller's ref0 (the caller adds
-    its reference base to child of every leaf). Returns the nodes used.
-    centroids are reordered as the build partitions them (bounds go
-    with a copy), so that every pass reads them in memory order.
 
-    The nodes above ~m / TASKS_PER_TREE primitives are split on one thread;
-    the subtrees below them by n_workers threads into disjoint scratch
-    regions; then one pass lays the nodes out in the order of a single
-    serial pass, so the tree does not depend on the thread count (nor on
-    whether it was built in parallel at all)."""
-    m = bounds.shape[0]
-    # a primitive's number travels with its box (column 6, as an int32 view)
-    boxed = np.empty((m, 7), np.float32)
+def _pool(n_workers):
+    global _POOL
+    if _POOL is None or _POOL._max_workers < n_workers:
+        _POOL = ThreadPoolExecutor(n_workers, thread_name_prefix="bvh-build")
+    return _POOL
+
+
+@kernel
+def _start_build(bounds, centroids, boxed, span0):
+    """boxed (m, 7): each primitive's box, then its number as int32 bits;
+    span0[0]: the box and centroid bounds of them all (numpy's axis-0
+    min and max took 9 ms on 77K triangles, a fifth of the build)."""
     boxed_i = boxed.view(np.int32)
-    for i in range(m):
+    for i in range(bounds.shape[0]):
         for q in range(6):
             boxed[i, q] = bounds[i, q]
         boxed_i[i, 6] = i
+    _span(bounds, centroids, 0, bounds.shape[0], span0, 0)
+
+
+def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
+    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
+    node region starting at node0 (root there, children in pairs after it).
+    `order` (m,) receives the primitives in leaf order: leaf k's references
+    are order[child[k] - ref0 ...] (child counts from the caller's
+    reference base ref0). Returns the nodes used and the tree's SAH cost
+    (sah_cost's, summed while laying it out). centroids are reordered
+    as the build partitions them (bounds are copied first).
+
+    The nodes above ~m / TASKS_PER_TREE primitives are split on one thread;
+    the subtrees below them by n_workers threads into disjoint scratch
+    regions; then one pass lays the nodes out as a single serial pass
+    would, so the tree does not depend on the thread count (nor on whether
+    it was built in parallel at all)."""
+    m = bounds.shape[0]
+    # a primitive's number travels with its box (column 6, as int32 bits)
+    boxed = np.empty((m, 7), np.float32)
     span0 = np.empty((1, 12), np.float32)
-    _span(bounds, centroids, 0, m, span0, 0)
+    _start_build(bounds, centroids, boxed, span0)
     # a binary tree over m primitives has at most 2m - 1 nodes: the top
-    # phase's, then each task's at 2 x its first primitive past them
+    # phase's first, then each task's from 2 x its first primitive on
     n_scratch = 4 * m + 1
     s_box = np.empty((n_scratch, 6), np.float32)
     s_child = np.empty(n_scratch, np.int64)
     s_count = np.empty(n_scratch, np.int64)
-    task_s = np.empty(m + 1, np.int64)
-    task_e = np.empty(m + 1, np.int64)
-    task_d = np.empty(m + 1, np.int64)
-    task_span = np.empty((m + 1, 12), np.float32)
-    stop_n = max(m // TASKS_PER_TREE, MIN_TASK) if n_workers > 1 else 0
+    stop_n = max(m // TASKS_PER_TREE, MIN_TASK) if n_workers > 1 and m >= 2 * MIN_TASK else 0
+    n_max = m + 1 if stop_n else 1          # tasks hold disjoint runs of primitives
+    task_s, task_e, task_d = (np.empty(n_max, np.int64) for _ in range(3))
+    task_span = np.empty((n_max, 12), np.float32)
     top_end, n_tasks = _build_nodes(boxed, centroids, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count,
                                     stop_n, task_s, task_e, task_d, task_span)
-    task_root = np.empty(n_tasks, np.int64)
-    for t in range(n_tasks):
-        task_root[t] = top_end + 2 * task_s[t]
-    queue = new_queue()
-    for _w in prange(n_workers):
-        while True:
-            t = next_tile(queue, n_tasks)
-            if t < 0:
-                break
-            _build_nodes(boxed, centroids, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
-                         task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
-    for i in range(m):
-        order[i] = boxed_i[i, 6]
-    return _relayout(s_box, s_child, s_count, task_root, node0, box, child, count)
+    task_root = top_end + 2 * task_s[:n_tasks]
+    if n_tasks:
+        tasks = iter(range(n_tasks))            # next() on it is atomic under the GIL
+
+        def work():
+            for t in tasks:
+                _build_nodes(boxed, centroids, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
+                             task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
+
+        helpers = [_pool(n_workers - 1).submit(work) for _ in range(min(n_workers, n_tasks) - 1)]
+        work()
+        for h in helpers:
+            h.result()
+    order[:] = boxed.view(np.int32)[:, 6]
+    return _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count)
+
+
+@kernel
+def gather_references(tris, order, tri_verts, faces, r0, tri, verts, leaf_faces):
+    """References r0, r0 + 1, ... in leaf order (build_region's `order` of
+    the triangles `tris`): each one's global id, corners and vertex ids,
+    in one pass (numpy's three gathers took 15 % of a build; on one thread,
+    as prim_bounds, so that no spinning thread slows the next tree's build)."""
+    for k in range(order.shape[0]):
+        t = tris[order[k]]
+        tri[r0 + k] = t
+        for q in range(9):
+            verts[r0 + k, q] = tri_verts[t, q]
+        for q in range(3):
+            leaf_faces[r0 + k, q] = faces[t, q]
 
 
 @kernel

@@ -23,7 +23,8 @@ import time
 import numba
 import numpy as np
 
-from .bvh_build import MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, prim_bounds, refit, refit_plan, sah_cost
+from .bvh_build import (MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, gather_references, prim_bounds, refit,
+                         refit_plan)
 
 # a refit tree is rebuilt when its SAH cost exceeds this many times its cost
 # at the last build. The SAH cost is the expected work of a ray, so a tree
@@ -114,17 +115,12 @@ class SceneBvh:
         order = np.empty(m, np.int32)
         b = self.bvh
         n0, r0 = int(self.node_lo[g]), int(self.ref_lo[g])
-        used = build_region(bounds, centroids, MAX_LEAF, n0, b.box, b.child, b.count, order,
-                            numba.get_num_threads())
-        region = slice(n0, n0 + 2 * m)
-        leaves = b.count[region] > 0
-        b.child[region][leaves] += r0
+        used, cost = build_region(bounds, centroids, MAX_LEAF, n0, r0, b.box, b.child, b.count, order,
+                                  numba.get_num_threads())
         b.child[n0 + used:n0 + 2 * m] = -1
         b.count[n0 + used:n0 + 2 * m] = 0
-        b.tri[r0:r0 + m] = tris[order]
-        b.verts[r0:r0 + m] = tri_verts[b.tri[r0:r0 + m]]
-        self.leaf_faces[r0:r0 + m] = self.faces[b.tri[r0:r0 + m]]
-        self.built_cost[g] = self.cost[g] = sah_cost(b.box, b.child, b.count, n0)
+        gather_references(tris, order, tri_verts, self.faces, r0, b.tri, b.verts, self.leaf_faces)
+        self.built_cost[g] = self.cost[g] = cost
         self.used[g] = used
         if self.moving[g]:
             front, ends, tops = refit_plan(b.child, b.count, n0, used)
@@ -196,7 +192,7 @@ class SceneBvh:
         bounds = np.ascontiguousarray(b.box[roots])
         centroids = np.where(bounds[:, :3] <= bounds[:, 3:], 0.5 * (bounds[:, :3] + bounds[:, 3:]), 0.0)
         order = np.empty(n_groups, np.int32)
-        used = build_region(bounds, np.ascontiguousarray(centroids, np.float32), 1, 0, b.box, b.child,
+        used, _ = build_region(bounds, np.ascontiguousarray(centroids, np.float32), 1, 0, 0, b.box, b.child,
                             b.count, order, 1)
         b.child[used:self.top_nodes] = -1
         b.count[used:self.top_nodes] = 0

@@ -450,3 +450,69 @@ def test_the_bin_scale_keeps_every_bin_in_range():
         assert np.all(np.isfinite(f)) and np.all(f >= 0)
         assert np.all(np.minimum(f.astype(np.int64), N_BINS - 1) <= N_BINS - 1)
         assert f.max() < N_BINS
+
+
+def _build(tv, n_workers):
+    """bvh_build.build_region over the triangles tv, as a SceneBvh builds a
+    tree: nodes, leaf order and SAH cost."""
+    from raycore.bvh_build import MAX_LEAF, build_region, empty_bvh, prim_bounds
+    m = len(tv)
+    bounds, centroids = np.empty((m, 6), np.float32), np.empty((m, 3), np.float32)
+    prim_bounds(tv, np.arange(m, dtype=np.int32), bounds, centroids)
+    b, order = empty_bvh(2 * m, m), np.empty(m, np.int32)
+    used, cost = build_region(bounds, centroids, MAX_LEAF, 0, 0, b.box, b.child, b.count, order, n_workers)
+    return b, used, cost, order
+
+
+def test_a_tree_built_by_many_threads_is_the_one_built_by_one(rng, monkeypatch):
+    """build_region splits the top of a tree on one thread and hands the
+    subtrees below to worker threads, then lays the nodes out as one serial
+    pass does: the tree (every node's box, child and count, bit for bit, and
+    the leaf order) is the same for 1, 2 and 3 workers, on random triangles,
+    triangles spread over the float range, triangles all in one point, and
+    triangles with infinite and NaN corners. Every triangle is in exactly one
+    leaf, every box holds its children's or triangles' boxes, and the cost
+    build_region reports is sah_cost's (NaN for boxes whose area overflows)."""
+    import raycore.bvh_build as bvh_build
+    n = 6000
+    spread = (2.0 ** np.linspace(-125, 125, n)).astype(np.float32)
+    far = np.zeros((n, 9), np.float32)
+    far[:, 0], far[:, 3], far[:, 6], far[:, 7] = spread, spread * np.float32(1.0001), spread, spread * 1e-3
+    odd = soup(rng, n, spread=3.0, size=0.2)
+    odd[rng.integers(0, n, 300), rng.integers(0, 9, 300)] = np.inf
+    odd[rng.integers(0, n, 300), rng.integers(0, 9, 300)] = np.nan
+    cases = {"soup": soup(rng, n, spread=5.0, size=0.3), "float range": far,
+             "one point": np.tile(np.float32([1, 2, 3, 1, 2, 3.5, 1.5, 2, 3]), (n, 1)), "odd corners": odd}
+    builds = []
+    real = bvh_build._build_nodes
+    monkeypatch.setattr(bvh_build, "_build_nodes", lambda *a: builds.append(a[11]) or real(*a))
+    for name, tv in cases.items():
+        builds.clear()
+        one = _build(tv, 1)
+        assert builds == [0], name                       # one pass, no tasks
+        for workers in (2, 3):
+            builds.clear()
+            many = _build(tv, workers)
+            assert builds[0] > 0 and len(builds) > workers, (name, builds)   # top phase, then tasks
+            assert many[1] == one[1] and np.array_equal(many[2], one[2], equal_nan=True), name
+            assert np.array_equal(many[0].node_i[:one[1]], one[0].node_i[:one[1]]), name
+            assert np.array_equal(many[3], one[3]), name
+        b, used, cost, order = one
+        assert sorted(order) == list(range(n)), name
+        assert cost == pytest.approx(sah_cost(b.box, b.child, b.count, 0), rel=1e-6, nan_ok=True), name
+        bounds = np.empty((n, 6), np.float32)
+        from raycore.bvh_build import prim_bounds
+        prim_bounds(tv, np.arange(n, dtype=np.int32), bounds, np.empty((n, 3), np.float32))
+        seen = np.zeros(n, int)
+        for i in range(used):
+            lo, hi = b.box[i, :3], b.box[i, 3:]
+            if b.count[i] > 0:
+                refs = order[b.child[i]:b.child[i] + b.count[i]]
+                seen[refs] += 1
+                inside = [bounds[refs, :3], bounds[refs, 3:]]
+            else:
+                kids = b.child[i] + np.arange(2)
+                inside = [b.box[kids, :3], b.box[kids, 3:]]
+            boxed = inside[0] <= inside[1]                 # empty boxes (no finite corner) hold nothing
+            assert np.all((inside[0] >= lo) | ~boxed) and np.all((inside[1] <= hi) | ~boxed), (name, i)
+        assert np.all(seen == 1), name
