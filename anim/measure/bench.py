@@ -82,13 +82,15 @@ def bench_scene(path: Path, name: str, res: int, n_frames: int, packet: int, thr
 
 
 def bvh_build_costs(scene, renderer, rows):
-    """The BVH's full build (all trees, on the first frame's triangles) and
-    median refit of the moving trees, in ms and in ms per 100K triangles;
+    """The BVH's full build (all trees, on the first frame's triangles;
+    the median of five: the build is on two threads, which a busy host
+    slows unevenly) and median refit of the moving trees, in ms and in ms
+    per 100K triangles;
     how often a refit tree was rebuilt, and its largest SAH growth."""
     trees = renderer.scene_grid.scene_bvh()
     tri_verts = renderer.scene_grid.tri_verts
     builds = []
-    for _ in range(3):
+    for _ in range(5):
         t0 = time.perf_counter()
         trees.build_all(tri_verts)
         builds.append((time.perf_counter() - t0) * 1e3)
