@@ -26,6 +26,7 @@ frame (boxes recomputed bottom-up, nodes in reverse order since children
 always follow their parent) and rebuilt only when its SAH cost has grown
 past a threshold measured against the cost at its last build.
 """
+import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
@@ -385,12 +386,16 @@ MIN_TASK = 256
 # queue) the build compiled in 11 s instead of 4, its big loop optimized
 # again inside the parallel region
 _POOL = None
+_POOL_PID = None
 
 
 def _pool(n_workers):
-    global _POOL
-    if _POOL is None or _POOL._max_workers < n_workers:
+    """The worker threads, made once per process (a pool inherited through
+    fork has no threads behind it: a child makes its own)."""
+    global _POOL, _POOL_PID
+    if _POOL is None or _POOL_PID != os.getpid() or _POOL._max_workers < n_workers:
         _POOL = ThreadPoolExecutor(n_workers, thread_name_prefix="bvh-build")
+        _POOL_PID = os.getpid()
     return _POOL
 
 
