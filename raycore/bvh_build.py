@@ -26,8 +26,6 @@ frame (boxes recomputed bottom-up, nodes in reverse order since children
 always follow their parent) and rebuilt only when its SAH cost has grown
 past a threshold measured against the cost at its last build.
 """
-import os
-from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -35,6 +33,7 @@ import numpy as np
 from numba import prange
 
 from ._jit import helper, kernel, parallel_kernel
+from .thread_pool import thread_pool
 
 N_BINS = 16
 # SAH constants: a node visit costs about as much as one ray/triangle test
@@ -339,8 +338,7 @@ def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, 
 def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count):
     """The scratch tree (root 0, DEFERRED nodes continued at their task's
     root) copied into box, child, count from node0 (leaves' references
-    from ref0) in depth-first order,
-    children in pairs, left subtree first: the layout a single pass of
+    from ref0) in depth-first order, children in pairs, left subtree first: the layout a single pass of
     _build_nodes makes, which refit_plan relies on. Returns the nodes used
     and the tree's SAH cost (as sah_cost, summed on the way)."""
     st_src = np.empty(STACK, np.int64)
@@ -377,26 +375,13 @@ def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count
 
 # build_region's top phase splits nodes down to about 1 / TASKS_PER_TREE
 # of the primitives; the subtrees below are built by all threads, pulled
-# from a queue (more tasks than threads, so the load balances)
+# from a queue (more tasks than threads, so the load balances). The workers
+# are Python threads (thread_pool.py), each calling the nogil kernel
+# _build_nodes: as a numba parallel kernel (prange over the queue) the
+# build compiled in 11 s instead of 4, its big loop optimized again inside
+# the parallel region
 TASKS_PER_TREE = 16
 MIN_TASK = 256
-
-# the build's worker threads. Python threads, each calling the nogil
-# kernel _build_nodes: as a numba parallel kernel (prange over a task
-# queue) the build compiled in 11 s instead of 4, its big loop optimized
-# again inside the parallel region
-_POOL = None
-_POOL_PID = None
-
-
-def _pool(n_workers):
-    """The worker threads, made once per process (a pool inherited through
-    fork has no threads behind it: a child makes its own)."""
-    global _POOL, _POOL_PID
-    if _POOL is None or _POOL_PID != os.getpid() or _POOL._max_workers < n_workers:
-        _POOL = ThreadPoolExecutor(n_workers, thread_name_prefix="bvh-build")
-        _POOL_PID = os.getpid()
-    return _POOL
 
 
 @kernel
@@ -452,7 +437,8 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
                 _build_nodes(boxed, centroids, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
                              task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
 
-        helpers = [_pool(n_workers - 1).submit(work) for _ in range(min(n_workers, n_tasks) - 1)]
+        pool = thread_pool("bvh-build", n_workers - 1)
+        helpers = [pool.submit(work) for _ in range(min(n_workers, n_tasks) - 1)]
         work()
         for h in helpers:
             h.result()

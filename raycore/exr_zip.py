@@ -19,12 +19,12 @@ bindings and OpenImageIO.
 """
 import os
 import struct
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from isal import isal_zlib
 
 from ._jit import kernel
+from .thread_pool import thread_pool
 
 MAGIC = 20000630
 VERSION = 2
@@ -32,8 +32,7 @@ LONG_NAMES = 0x400              # version flag: an attribute or channel name lon
 HALF, FLOAT = 1, 2              # OpenEXR pixel types
 CODES = {"zip": (3, 16), "zips": (2, 1)}       # codec -> (compression attribute, scanlines per block)
 LEVEL = 1                       # ISA-L's level 1: its levels 2 and 3 were no smaller here, and slower
-TASKS = 64                      # deflate tasks per frame, for the pool below
-_POOL = ThreadPoolExecutor(os.cpu_count() or 1, thread_name_prefix="exr-deflate")
+TASKS = 64                      # deflate tasks per frame, for the thread pool
 
 
 @kernel
@@ -149,7 +148,8 @@ def encode(channels: dict, metadata: dict, codec: str = "zip") -> list:
     # tasks of several blocks (zips has one per scanline: a task each cost more than its deflate)
     per_task = max(1, len(starts) // TASKS)
     tasks = [starts[i:i + per_task] for i in range(0, len(starts), per_task)]
-    blocks = [b for done in _POOL.map(lambda task: [deflate(y0) for y0 in task], tasks) for b in done]
+    pool = thread_pool("exr-deflate", os.cpu_count() or 1)
+    blocks = [b for done in pool.map(lambda task: [deflate(y0) for y0 in task], tasks) for b in done]
     head = header([(n, HALF if a.dtype == np.float16 else FLOAT) for n, a in zip(names, arrays)],
                   width, height, compression, metadata)
     offsets = np.empty(len(blocks), np.uint64)
