@@ -53,16 +53,17 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
     region stays a call, which compiles in half the time of the whole loop
     inside it (numba analyses a prange body's every statement)."""
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+    ordered = order.shape[0] > 0
     while True:
         p = next_tile(queue, n_packets)
         if p < 0:
             break
         base = p * PACKET
         n = min(PACKET, n_active - base)
-        i0 = order[base]
+        i0 = order[base] if ordered else base
         shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
         for r in range(n):
-            i = order[base + r]
+            i = order[base + r] if ordered else base + r
             j = i0 if shared else i
             ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
             ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
@@ -74,11 +75,12 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
                       counters, p)
         for r in range(n):
-            i = order[base + r]
+            i = order[base + r] if ordered else base + r
             k = prim[r]
             if want_vis:
-                # loaded rays are live (t_max >= t_min): -inf means occluded
-                vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
+                # lit: live when loaded (t_max >= t_min, which an inactive ray's
+                # -1 is not) and not occluded (t_max still, not -inf or a hit)
+                vis[i] = F1 if (k < 0 and h_t[r] >= ray[TMIN, r]) else F0
             if want_hits:
                 out_prim[i] = bvh.tri[k] if k >= 0 else -1
                 out_t[i] = h_t[r] if k >= 0 else INF
@@ -90,7 +92,8 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
 def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, n_workers,
                 out_t, out_prim, out_b1, out_b2, vis, counters):
     """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets of
-    PACKET consecutive entries, pulled from the tile queue. Writes the hits
+    PACKET consecutive entries, pulled from the tile queue; rays 0..n_active-1
+    in their own order when `order` is empty (those with t_max < t_min dead). Writes the hits
     (out_*, global triangle ids, when out_t is not empty) or the visibility
     (vis, when not empty: 1 = nothing in (t_min, t_max)). mode SINGLE traces
     every ray alone. counters: one row per packet."""
@@ -154,6 +157,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, n_workers, out_t, out_prim
 
 # --- plain-Python wrappers: validate, allocate, call ------------------------
 NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32))
+NO_ORDER = np.zeros(0, np.int32)
 
 
 def _workers():
@@ -167,12 +171,17 @@ def _counters(n_rays):
 
 def bvh_light_visibility(bvh: Bvh, rays, vis):
     """Visibility (1 lit, 0 shadowed or facing away) of one light's shadow
-    rays (shadow_rays.LightRays, in light-space order): packets sharing the
-    light as origin (point light) or its direction (directional light)."""
-    vis[:] = 0.0
-    counters = _counters(rays.n_active)
+    rays (shadow_rays.LightRays, in light-space order or the samples' own):
+    packets sharing the light as origin (point light) or its direction
+    (directional light)."""
+    if rays.order is None:
+        order, n = NO_ORDER, rays.t_max.shape[0]        # every vis[i] written
+    else:
+        order, n = rays.order, rays.n_active
+        vis[:] = 0.0
+    counters = _counters(n)
     mode = SHARED_ORIGIN if rays.shared_origin else SHARED_DIRECTION
-    trace_batch(bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
+    trace_batch(bvh, order, n, rays.origin, rays.direction, rays.t_min, rays.t_max,
                 True, mode, _workers(), *NO_HITS, vis, counters)
     return vis, counters.sum(axis=0)
 

@@ -244,9 +244,13 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["tri_tests"] += c.tests
         counters["fallback_rays"] += c.fallback_rays
 
-    def shade_surface(surface, aov=True):
+    def shade_surface(surface, aov=True, coherent=True):
         """Shadow rays and shading of visible samples: rgb (3, n); with aov,
-        the samples (one pass's) also offered to the AOVs."""
+        the samples (one pass's) also offered to the AOVs. coherent: the
+        samples are in a camera pass's gather order (32x32-pixel blocks),
+        which a shadow structure without light_order traces as it is; the
+        error budget's scattered samples are sorted in light space first."""
+        light_order = getattr(scene.shadow_accel, "light_order", True) or not coherent
         t0 = time.perf_counter()
         n_vis = surface.pixel.shape[0]
         vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
@@ -255,7 +259,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
 
             def trace(li, skip=None):
                 rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
-                                 buffers.work, skip)
+                                 buffers.work, skip, light_order)
                 c = scene.shadow_accel.trace_shadows(rays, vis[li])
                 counters["shadow_rays"] += rays.n_active
                 counters["shadow_rays_skipped"] += n_vis - rays.n_active
@@ -407,7 +411,8 @@ def refine_pixels(rgba, z, cfg, scene, buffers, gather, shade_surface, count_cam
                 aovs.add(surface)
             surfaces.append(Surface(*(np.array(f) for f in surface)))     # out of the workspace
         # the passes' samples shadowed and shaded as one set
-        rgb = shade_surface(Surface(*(np.concatenate(f, axis=-1) for f in zip(*surfaces))), aov=False)
+        rgb = shade_surface(Surface(*(np.concatenate(f, axis=-1) for f in zip(*surfaces))), aov=False,
+                            coherent=False)
         out, k = [], 0
         for s in surfaces:
             n_hit = s.pixel.shape[0]

@@ -2,8 +2,10 @@
 
 Packets cut from camera tiles straddle silhouettes: one packet holds rays to
 a hand and to the ground metres behind it, and its frustum sweeps through
-everything between. Here the rays are reordered first, so that a packet's
-rays are neighbours as the light sees them:
+everything between. For the grid's frustum walk (and the kd-tree) the rays
+are reordered first, so that a packet's rays are neighbours as the light
+sees them (the BVH, whose packets test each ray against each box, traces a
+camera pass's rays in the gather's order: see BvhAccel.light_order):
   * point light: every ray leaves the light (traced from the light to the
     surface point, same segment), so a packet shares its origin and takes the
     grid walk's shared-origin path (edge planes through the light, three dot
@@ -56,10 +58,13 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
     """Shadow ray of every surface sample to one light (kind 0: point at
     (lx, ly, lz); 1: directional, travelling along the unit (lx, ly, lz)).
     Inactive (t_max = -1) where the smooth normal faces away from the light.
-    face / key_s / key_t: the light-space coordinates the packets are sorted by.
+    face / key_s / key_t: the light-space coordinates the packets are sorted
+    by (written even when they are not sorted: skipping them in the loop
+    made it 7x slower). Returns how many rays are active.
     One branch-free loop per kind, so that each vectorizes (one loop testing
     the kind per sample did not: 6.3 ms a light on hand at 1024^2)."""
     n = mag.shape[0]
+    active = 0
     if kind == 0:
         light_mag = max(abs(lx), abs(ly), abs(lz))
         for i in prange(n):
@@ -83,6 +88,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[2, i] = dz
             t_min[i] = dist * SHADOW_T_MIN_FRACTION
             t_max[i] = dist if (facing & (dist > F0)) else -F1
+            active += 1 if (facing & (dist > F0)) else 0
             # cube-map face of the direction and its two coordinates on it
             ax, ay, az = abs(dx), abs(dy), abs(dz)
             x_major = (ax >= ay) & (ax >= az)
@@ -118,9 +124,11 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[2, i] = -lz
             t_min[i] = F0
             t_max[i] = INF if facing else -F1
+            active += 1 if facing else 0
             face[i] = 0
             key_s[i] = ox * ux + oy * uy + oz * uz
             key_t[i] = ox * vx + oy * vy + oz * vz
+    return active
 
 
 @helper
@@ -225,9 +233,14 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key,
 
 class LightRays:
     """One light's shadow rays for a Surface, in structure-of-arrays form
-    (with a Workspace: reused buffers, valid until the next light's rays)."""
+    (with a Workspace: reused buffers, valid until the next light's rays).
 
-    def __init__(self, surface, kind, light_vec, workspace=None, skip=None):
+    light_order: also sort the active rays into light-space order (`order`,
+    its first n_active entries), which the grid's frustum packets need; else
+    `order` is None and the rays are traced in the samples' own order, the
+    inactive ones dead in their packets (the BVH: see BvhAccel.light_order)."""
+
+    def __init__(self, surface, kind, light_vec, workspace=None, skip=None, light_order=True):
         """skip (n,) bool: samples that get no ray (their visibility is known)."""
         n = surface.mag.shape[0]
         f32 = np.float32
@@ -249,14 +262,17 @@ class LightRays:
         key_t = take("key_t", n)
         lx, ly, lz = (f32(c) for c in light_vec)
         chunks = max(1, numba.get_num_threads())
-        light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
-                   surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction, self.t_min,
-                   self.t_max, face, key_s, key_t)
+        self.n_active = int(light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
+                                       surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction,
+                                       self.t_min, self.t_max, face, key_s, key_t))
         if skip is not None:
             self.t_max[skip] = -1.0
-        self.order = take("order", n, np.int32)
-        self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
-                                              self.kind == 0, take("key", n, np.int32), self.order)) if n else 0
+            self.n_active = int(np.count_nonzero(self.t_max > 0))
+        self.order = None
+        if light_order:
+            self.order = take("order", n, np.int32)
+            self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
+                                                  self.kind == 0, take("key", n, np.int32), self.order)) if n else 0
 
     @property
     def shared_origin(self):

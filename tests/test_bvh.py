@@ -216,7 +216,10 @@ def test_a_tree_whose_parts_scatter_is_rebuilt(rng):
 def test_shadow_rays_see_what_the_grid_sees(rng, kind):
     """The frame's shadow rays (LightRays, light-space order) through the BVH
     and through the grid: the same visibility, but for rays that graze an
-    occluder's edge within float32 rounding (checked against brute force)."""
+    occluder's edge within float32 rounding (checked against brute force).
+    The BVH's own path, the rays in the samples' order with the inactive
+    ones dead in their packets, gives what it gives in light-space order,
+    and writes every sample's visibility (the vis buffer starts as garbage)."""
     tv = np.ascontiguousarray(np.concatenate([
         soup(rng, 1500, spread=3.0, size=0.3),
         np.array([[-4, -2, -4, 4, -2, -4, 0, -2, 4], [-4, -2, 4, 4, -2, 4, 0, -2, -4]], np.float32)]))
@@ -234,6 +237,12 @@ def test_shadow_rays_see_what_the_grid_sees(rng, kind):
     bvh.trace_shadows(rays, vis_bvh)
     GridAccel(grid, tv, 16).trace_shadows(rays, vis_grid)
     assert rays.n_active > 1000 and 0.05 < 1 - vis_bvh[rays.t_max > 0].mean() < 0.95
+    unsorted = LightRays(surface, kind, light, light_order=False)
+    assert unsorted.order is None and unsorted.n_active == rays.n_active
+    assert 0 < np.count_nonzero(unsorted.t_max <= 0) < len(unsorted.t_max) // 2   # some face away: dead rays
+    vis_unsorted = np.full(len(rays.t_max), np.nan, np.float32)
+    bvh.trace_shadows(unsorted, vis_unsorted)
+    assert np.array_equal(vis_unsorted, vis_bvh)
     differ = np.nonzero(vis_bvh != vis_grid)[0]
     assert len(differ) <= 3, len(differ)
     for i in differ:                     # each is a graze: a hit on an edge or corner

@@ -29,7 +29,7 @@ from raycore.counters import Counters
 from raycore.trace import Hits, row_major_offsets
 
 # the surface half's kernels that tell whether the cache is cold
-_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.shadow_rays:light_space_order")
+_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.shadow_rays:light_rays")
 
 
 def _cached(probe) -> bool:
