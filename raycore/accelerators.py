@@ -20,7 +20,7 @@ leaves a tree's packets reached.
 import numpy as np
 
 from .bvh_build import Bvh
-from .bvh_trace import bvh_light_visibility, bvh_trace_camera, bvh_trace_rays
+from .bvh_trace import bvh_light_visibility, bvh_sample_visibility, bvh_trace_camera, bvh_trace_rays
 from .counters import Counters
 from .grid_build import Grid
 from .kdtree_build import KdTree
@@ -36,7 +36,6 @@ KD_PACKET = 8
 class GridAccel:
     """The uniform grid of this frame (grid_build.Grid) over tri_verts."""
     name = "grid"
-    light_order = True      # its frustum packets need shadow rays sorted in light space
 
     def __init__(self, grid: Grid, tri_verts, packet: int, cull=True, buffers=None):
         self.grid, self.tri_verts, self.packet, self.cull = grid, tri_verts, packet, cull
@@ -64,7 +63,6 @@ class KdAccel:
     """An SAH kd-tree (kdtree_build.KdTree) over tri_verts."""
     name = "kdtree"
     packet = KD_PACKET
-    light_order = True
 
     def __init__(self, tree: KdTree, tri_verts):
         self.tree, self.tri_verts = tree, tri_verts
@@ -92,10 +90,6 @@ class BvhAccel:
     """The frame's BVH (bvh_build.Bvh, kept by scene_bvh.SceneBvh) over tri_verts."""
     name = "bvh"
     packet = 8          # camera packets are 8x8 pixels
-    # shadow rays in the samples' own order (32x32-pixel blocks), not sorted
-    # into light-space order first: the sort cost 3 ms a light on hand and
-    # its packets traced no faster (see README, Performance)
-    light_order = False
 
     def __init__(self, bvh: Bvh, tri_verts, workspace=None):
         self.bvh, self.tri_verts, self.workspace = bvh, tri_verts, workspace
@@ -110,6 +104,15 @@ class BvhAccel:
     def trace_shadows(self, rays, vis) -> Counters:
         _, c = bvh_light_visibility(self.bvh, rays, vis)
         return Counters.of(c)
+
+    def trace_light(self, surface, kind, light_vec, vis, skip=None):
+        """(Counters, active rays): vis[i] = 1 where sample i of a camera
+        pass's Surface sees the light. Its shadow rays are made in the
+        packets, in the samples' order, with no light-space sort: the
+        gather's 32x32-pixel blocks are coherent as they are (README,
+        Performance). Structures without this method get LightRays."""
+        n, c = bvh_sample_visibility(self.bvh, surface, kind, light_vec, vis, skip)
+        return Counters.of(c), n
 
     def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:
         h = Hits(*bvh_trace_rays(self.bvh, origins, dirs, t_min, t_max, any_hit))

@@ -11,11 +11,14 @@ from .bvh_build import STACK, Bvh
 from .bvh_packets import (DX, DY, DZ, F0, F1, INF, N_ROWS, OX, OY, OZ, PACKET, SHARED_DIRECTION,
                           SHARED_ORIGIN, SINGLE, TMIN, set_inverse, trace_single, walk_packet)
 from .camera import primary_dir
+from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .counters import FALLBACK_RAYS, N_COUNTERS, PACKETS
+from .shadow_rays import directional_light_ray, point_light_ray
 from .tile_queue import new_queue, next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
-           "bvh_trace_camera", "bvh_trace_rays", "trace_batch", "trace_camera_bvh"]
+           "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "trace_batch", "trace_camera_bvh",
+           "trace_light_samples"]
 
 
 @helper
@@ -53,17 +56,16 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
     region stays a call, which compiles in half the time of the whole loop
     inside it (numba analyses a prange body's every statement)."""
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
-    ordered = order.shape[0] > 0
     while True:
         p = next_tile(queue, n_packets)
         if p < 0:
             break
         base = p * PACKET
         n = min(PACKET, n_active - base)
-        i0 = order[base] if ordered else base
+        i0 = order[base]
         shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
         for r in range(n):
-            i = order[base + r] if ordered else base + r
+            i = order[base + r]
             j = i0 if shared else i
             ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
             ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
@@ -75,12 +77,11 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
                       counters, p)
         for r in range(n):
-            i = order[base + r] if ordered else base + r
+            i = order[base + r]
             k = prim[r]
             if want_vis:
-                # lit: live when loaded (t_max >= t_min, which an inactive ray's
-                # -1 is not) and not occluded (t_max still, not -inf or a hit)
-                vis[i] = F1 if (k < 0 and h_t[r] >= ray[TMIN, r]) else F0
+                # loaded rays are live (t_max >= t_min): -inf means occluded
+                vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
             if want_hits:
                 out_prim[i] = bvh.tri[k] if k >= 0 else -1
                 out_t[i] = h_t[r] if k >= 0 else INF
@@ -92,8 +93,7 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
 def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, n_workers,
                 out_t, out_prim, out_b1, out_b2, vis, counters):
     """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets of
-    PACKET consecutive entries, pulled from the tile queue; rays 0..n_active-1
-    in their own order when `order` is empty (those with t_max < t_min dead). Writes the hits
+    PACKET consecutive entries, pulled from the tile queue. Writes the hits
     (out_*, global triangle ids, when out_t is not empty) or the visibility
     (vis, when not empty: 1 = nothing in (t_min, t_max)). mode SINGLE traces
     every ray alone. counters: one row per packet."""
@@ -105,6 +105,87 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
     for _w in prange(n_workers):
         _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, vis_only, mode, queue,
                       n_packets, want_hits, want_vis, out_t, out_prim, out_b1, out_b2, vis, counters)
+
+
+@helper
+def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted, geo_n,
+                     smooth_n, mag, offset_ulps, skip):
+    """Samples base..base+n-1's shadow rays to one light into a packet, made
+    here from the samples (the same rays shadow_rays.light_rays makes);
+    inactive ones dead. Returns how many are active."""
+    live = 0
+    if kind == 0:
+        for r in range(n):
+            dx, dy, dz, dist, active = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
+                                                       offset_ulps, base + r)
+            ray[OX, r], ray[OY, r], ray[OZ, r] = lx, ly, lz
+            ray[DX, r], ray[DY, r], ray[DZ, r] = dx, dy, dz
+            ray[TMIN, r] = dist * SHADOW_T_MIN_FRACTION
+            h_t[r] = dist if active else -F1
+            live += 1 if active else 0
+    else:
+        for r in range(n):
+            ox, oy, oz, active = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
+                                                       base + r)
+            ray[OX, r], ray[OY, r], ray[OZ, r] = ox, oy, oz
+            ray[DX, r], ray[DY, r], ray[DZ, r] = -lx, -ly, -lz
+            ray[TMIN, r] = F0
+            h_t[r] = INF if active else -F1
+            live += 1 if active else 0
+    if skip.shape[0] > 0:
+        for r in range(n):
+            if skip[base + r] and h_t[r] > F0:
+                h_t[r] = -F1
+                live -= 1
+    for r in range(n):
+        h_b1[r] = F0
+        h_b2[r] = F0
+        prim[r] = -1
+    return live
+
+
+@kernel
+def _light_worker(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, n_packets,
+                  vis, counters):
+    """One thread's share of trace_light_samples (see _batch_worker)."""
+    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+    n_samples = mag.shape[0]
+    mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+    light_mag = max(abs(lx), max(abs(ly), abs(lz)))
+    live = 0
+    while True:
+        p = next_tile(queue, n_packets)
+        if p < 0:
+            break
+        base = p * PACKET
+        n = min(PACKET, n_samples - base)
+        live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
+                                 geo_n, smooth_n, mag, offset_ulps, skip)
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, p)
+        # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
+        for r in range(n):
+            vis[base + r] = F1 if h_t[r] >= ray[TMIN, r] else F0
+    return live
+
+
+@parallel_kernel
+def trace_light_samples(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, n_workers,
+                        vis, counters):
+    """Visibility of one light (kind 0: point at (lx, ly, lz); 1: directional
+    along it) from every surface sample: vis[i] = 1 when sample i's shadow
+    ray reaches the light, 0 when it is occluded, faces away or skip[i] (when
+    skip is not empty). The rays are made in the packets, PACKET consecutive
+    samples each (a camera pass's samples come in 32x32-pixel blocks, so a
+    packet's are neighbours), instead of being written out by light_rays and
+    read back: 44 bytes a sample moved instead of ~120, and no sort. Returns
+    how many rays were active. counters: one row per packet."""
+    n_packets = (mag.shape[0] + PACKET - 1) // PACKET
+    queue = new_queue()
+    live = 0
+    for _w in prange(n_workers):
+        live += _light_worker(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue,
+                              n_packets, vis, counters)
+    return live
 
 
 @parallel_kernel
@@ -157,7 +238,6 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, n_workers, out_t, out_prim
 
 # --- plain-Python wrappers: validate, allocate, call ------------------------
 NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32))
-NO_ORDER = np.zeros(0, np.int32)
 
 
 def _workers():
@@ -171,19 +251,30 @@ def _counters(n_rays):
 
 def bvh_light_visibility(bvh: Bvh, rays, vis):
     """Visibility (1 lit, 0 shadowed or facing away) of one light's shadow
-    rays (shadow_rays.LightRays, in light-space order or the samples' own):
-    packets sharing the light as origin (point light) or its direction
-    (directional light)."""
-    if rays.order is None:
-        order, n = NO_ORDER, rays.t_max.shape[0]        # every vis[i] written
-    else:
-        order, n = rays.order, rays.n_active
-        vis[:] = 0.0
-    counters = _counters(n)
+    rays (shadow_rays.LightRays, in light-space order): packets sharing the
+    light as origin (point light) or its direction (directional light)."""
+    vis[:] = 0.0
+    counters = _counters(rays.n_active)
     mode = SHARED_ORIGIN if rays.shared_origin else SHARED_DIRECTION
-    trace_batch(bvh, order, n, rays.origin, rays.direction, rays.t_min, rays.t_max,
+    trace_batch(bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
                 True, mode, _workers(), *NO_HITS, vis, counters)
     return vis, counters.sum(axis=0)
+
+
+NO_SKIP = np.zeros(0, np.bool_)
+
+
+def bvh_sample_visibility(bvh: Bvh, surface, kind, light_vec, vis, skip=None):
+    """Visibility (1 lit, 0 shadowed or facing away) of one light from every
+    sample of a camera pass's Surface, its shadow rays made and traced in
+    the samples' order (trace_light_samples), and (active rays, counters)."""
+    n = surface.mag.shape[0]
+    counters = _counters(n)
+    lx, ly, lz = (np.float32(c) for c in light_vec)
+    skip = NO_SKIP if skip is None else np.ascontiguousarray(skip, np.bool_)
+    live = trace_light_samples(bvh, int(kind), lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
+                               surface.mag, np.float32(EPS_OFFSET_ULPS), skip, _workers(), vis, counters)
+    return int(live), counters.sum(axis=0)
 
 
 def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=False, mode=None):

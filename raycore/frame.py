@@ -248,21 +248,25 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         """Shadow rays and shading of visible samples: rgb (3, n); with aov,
         the samples (one pass's) also offered to the AOVs. coherent: the
         samples are in a camera pass's gather order (32x32-pixel blocks),
-        which a shadow structure without light_order traces as it is; the
-        error budget's scattered samples are sorted in light space first."""
-        light_order = getattr(scene.shadow_accel, "light_order", True) or not coherent
+        which a structure with trace_light (the BVH) traces as they come;
+        the error budget's scattered samples, and every sample for the
+        others, go through LightRays' light-space sort."""
         t0 = time.perf_counter()
         n_vis = surface.pixel.shape[0]
         vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
         if cast_shadows:
             vis[[li for li in range(n_lights) if li not in lit]] = 0.0
+            direct = coherent and hasattr(scene.shadow_accel, "trace_light")
 
             def trace(li, skip=None):
-                rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4],
-                                 buffers.work, skip, light_order)
-                c = scene.shadow_accel.trace_shadows(rays, vis[li])
-                counters["shadow_rays"] += rays.n_active
-                counters["shadow_rays_skipped"] += n_vis - rays.n_active
+                kind, light = int(shading.lights[li, 0]), shading.lights[li, 1:4]
+                if direct:
+                    c, n_active = scene.shadow_accel.trace_light(surface, kind, light, vis[li], skip)
+                else:
+                    rays = LightRays(surface, kind, light, buffers.work, skip)
+                    c, n_active = scene.shadow_accel.trace_shadows(rays, vis[li]), rays.n_active
+                counters["shadow_rays"] += n_active
+                counters["shadow_rays_skipped"] += n_vis - n_active
                 counters["tri_tests"] += c.tests
                 counters["cells"] += c.visits
             for rows in light_groups(shading.lights, lit):

@@ -2,10 +2,11 @@
 
 Packets cut from camera tiles straddle silhouettes: one packet holds rays to
 a hand and to the ground metres behind it, and its frustum sweeps through
-everything between. For the grid's frustum walk (and the kd-tree) the rays
-are reordered first, so that a packet's rays are neighbours as the light
-sees them (the BVH, whose packets test each ray against each box, traces a
-camera pass's rays in the gather's order: see BvhAccel.light_order):
+everything between. For the grid's frustum walk, the kd-tree and scattered
+samples (the error budget's), the rays are reordered first, so that a
+packet's rays are neighbours as the light sees them (the BVH makes a camera
+pass's rays itself, in the samples' order, from point_light_ray and
+directional_light_ray: bvh_trace.trace_light_samples):
   * point light: every ray leaves the light (traced from the light to the
     surface point, same segment), so a packet shares its origin and takes the
     grid walk's shared-origin path (edge planes through the light, three dot
@@ -52,34 +53,52 @@ ORDER_BITS = 5
 N_FACES = 6
 
 
+@helper
+def point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag, offset_ulps, i):
+    """Sample i's shadow ray to a point light at (lx, ly, lz) (light_mag: its
+    largest |coordinate|), from the light to the sample's lifted point pushed
+    off the surface: (unit direction, distance, active), inactive where the
+    smooth normal faces away from the light or the distance is 0."""
+    qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
+    tx, ty, tz = lx - qx, ly - qy, lz - qz
+    facing = smooth_n[0, i] * tx + smooth_n[1, i] * ty + smooth_n[2, i] * tz > F0
+    dist0 = np.sqrt(tx * tx + ty * ty + tz * tz)
+    off = offset_ulps * ULP * (mag[i] + light_mag + dist0)
+    # from the light to the offset point
+    dx = qx + geo_n[0, i] * off - lx
+    dy = qy + geo_n[1, i] * off - ly
+    dz = qz + geo_n[2, i] * off - lz
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz)
+    inv = F1 / dist if dist > F0 else F0
+    return dx * inv, dy * inv, dz * inv, dist, facing & (dist > F0)
+
+
+@helper
+def directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i):
+    """Sample i's shadow ray toward a directional light travelling along the
+    unit (lx, ly, lz): (origin pushed off the surface, active), inactive
+    where the smooth normal faces away from the light."""
+    facing = smooth_n[0, i] * lx + smooth_n[1, i] * ly + smooth_n[2, i] * lz < F0
+    off = offset_ulps * ULP * mag[i]
+    return (lifted[0, i] + geo_n[0, i] * off, lifted[1, i] + geo_n[1, i] * off,
+            lifted[2, i] + geo_n[2, i] * off, facing)
+
+
 @parallel_arith_kernel
 def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
                ray_o, ray_d, t_min, t_max, face, key_s, key_t):
     """Shadow ray of every surface sample to one light (kind 0: point at
     (lx, ly, lz); 1: directional, travelling along the unit (lx, ly, lz)).
     Inactive (t_max = -1) where the smooth normal faces away from the light.
-    face / key_s / key_t: the light-space coordinates the packets are sorted
-    by (written even when they are not sorted: skipping them in the loop
-    made it 7x slower). Returns how many rays are active.
+    face / key_s / key_t: the light-space coordinates the packets are sorted by.
     One branch-free loop per kind, so that each vectorizes (one loop testing
     the kind per sample did not: 6.3 ms a light on hand at 1024^2)."""
     n = mag.shape[0]
-    active = 0
     if kind == 0:
         light_mag = max(abs(lx), abs(ly), abs(lz))
         for i in prange(n):
-            qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
-            tx, ty, tz = lx - qx, ly - qy, lz - qz
-            facing = smooth_n[0, i] * tx + smooth_n[1, i] * ty + smooth_n[2, i] * tz > F0
-            dist0 = np.sqrt(tx * tx + ty * ty + tz * tz)
-            off = offset_ulps * ULP * (mag[i] + light_mag + dist0)
-            # from the light to the offset point
-            dx = qx + geo_n[0, i] * off - lx
-            dy = qy + geo_n[1, i] * off - ly
-            dz = qz + geo_n[2, i] * off - lz
-            dist = np.sqrt(dx * dx + dy * dy + dz * dz)
-            inv = F1 / dist if dist > F0 else F0
-            dx, dy, dz = dx * inv, dy * inv, dz * inv
+            dx, dy, dz, dist, active = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
+                                                       offset_ulps, i)
             ray_o[0, i] = lx
             ray_o[1, i] = ly
             ray_o[2, i] = lz
@@ -87,8 +106,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[1, i] = dy
             ray_d[2, i] = dz
             t_min[i] = dist * SHADOW_T_MIN_FRACTION
-            t_max[i] = dist if (facing & (dist > F0)) else -F1
-            active += 1 if (facing & (dist > F0)) else 0
+            t_max[i] = dist if active else -F1
             # cube-map face of the direction and its two coordinates on it
             ax, ay, az = abs(dx), abs(dy), abs(dz)
             x_major = (ax >= ay) & (ax >= az)
@@ -110,12 +128,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
         vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
         for i in prange(n):
-            qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
-            facing = smooth_n[0, i] * lx + smooth_n[1, i] * ly + smooth_n[2, i] * lz < F0
-            off = offset_ulps * ULP * mag[i]
-            ox = qx + geo_n[0, i] * off
-            oy = qy + geo_n[1, i] * off
-            oz = qz + geo_n[2, i] * off
+            ox, oy, oz, active = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i)
             ray_o[0, i] = ox
             ray_o[1, i] = oy
             ray_o[2, i] = oz
@@ -123,12 +136,10 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[1, i] = -ly
             ray_d[2, i] = -lz
             t_min[i] = F0
-            t_max[i] = INF if facing else -F1
-            active += 1 if facing else 0
+            t_max[i] = INF if active else -F1
             face[i] = 0
             key_s[i] = ox * ux + oy * uy + oz * uz
             key_t[i] = ox * vx + oy * vy + oz * vz
-    return active
 
 
 @helper
@@ -233,14 +244,9 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key,
 
 class LightRays:
     """One light's shadow rays for a Surface, in structure-of-arrays form
-    (with a Workspace: reused buffers, valid until the next light's rays).
+    (with a Workspace: reused buffers, valid until the next light's rays)."""
 
-    light_order: also sort the active rays into light-space order (`order`,
-    its first n_active entries), which the grid's frustum packets need; else
-    `order` is None and the rays are traced in the samples' own order, the
-    inactive ones dead in their packets (the BVH: see BvhAccel.light_order)."""
-
-    def __init__(self, surface, kind, light_vec, workspace=None, skip=None, light_order=True):
+    def __init__(self, surface, kind, light_vec, workspace=None, skip=None):
         """skip (n,) bool: samples that get no ray (their visibility is known)."""
         n = surface.mag.shape[0]
         f32 = np.float32
@@ -262,17 +268,14 @@ class LightRays:
         key_t = take("key_t", n)
         lx, ly, lz = (f32(c) for c in light_vec)
         chunks = max(1, numba.get_num_threads())
-        self.n_active = int(light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
-                                       surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction,
-                                       self.t_min, self.t_max, face, key_s, key_t))
+        light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
+                   surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction, self.t_min,
+                   self.t_max, face, key_s, key_t)
         if skip is not None:
             self.t_max[skip] = -1.0
-            self.n_active = int(np.count_nonzero(self.t_max > 0))
-        self.order = None
-        if light_order:
-            self.order = take("order", n, np.int32)
-            self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
-                                                  self.kind == 0, take("key", n, np.int32), self.order)) if n else 0
+        self.order = take("order", n, np.int32)
+        self.n_active = int(light_space_order(self.t_max, face, key_s, key_t, ORDER_BITS, chunks,
+                                              self.kind == 0, take("key", n, np.int32), self.order)) if n else 0
 
     @property
     def shared_origin(self):

@@ -99,7 +99,7 @@ def test_a_cold_start_compiles_in_two_processes():
     run_stats = json.loads(stats.read_text())["runs"][-1]
     here, helper = set(run_stats["compiled"]), set(run_stats.get("compiled_by_helper", {}))
     surface_half = {"raycore.surface.fill_surface", "raycore.shade.shade_samples",
-                    "raycore.shadow_rays.light_rays", "raycore.bvh_trace.trace_batch"}
+                    "raycore.bvh_trace.trace_light_samples"}
     assert {"raycore.grid_drivers.trace_primary", "raycore.bvh_build._build_nodes"} <= here
     assert surface_half <= helper and not surface_half & here, (here, helper)
     assert "raycore.bvh_build._build_nodes" not in helper            # the helper's BVH is made up

@@ -29,7 +29,7 @@ from raycore.counters import Counters
 from raycore.trace import Hits, row_major_offsets
 
 # the surface half's kernels that tell whether the cache is cold
-_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.shadow_rays:light_rays")
+_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.bvh_trace:trace_light_samples")
 
 
 def _cached(probe) -> bool:
