@@ -116,22 +116,22 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
     live = 0
     if kind == 0:
         for r in range(n):
-            dx, dy, dz, dist, active = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
-                                                       offset_ulps, base + r)
+            dx, dy, dz, dist, t_far = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
+                                                      offset_ulps, base + r)
             ray[OX, r], ray[OY, r], ray[OZ, r] = lx, ly, lz
             ray[DX, r], ray[DY, r], ray[DZ, r] = dx, dy, dz
             ray[TMIN, r] = dist * SHADOW_T_MIN_FRACTION
-            h_t[r] = dist if active else -F1
-            live += 1 if active else 0
+            h_t[r] = t_far
+            live += 1 if t_far > F0 else 0
     else:
         for r in range(n):
-            ox, oy, oz, active = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
-                                                       base + r)
+            ox, oy, oz, t_far = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
+                                                      base + r)
             ray[OX, r], ray[OY, r], ray[OZ, r] = ox, oy, oz
             ray[DX, r], ray[DY, r], ray[DZ, r] = -lx, -ly, -lz
             ray[TMIN, r] = F0
-            h_t[r] = INF if active else -F1
-            live += 1 if active else 0
+            h_t[r] = t_far
+            live += 1 if t_far > F0 else 0
     if skip.shape[0] > 0:
         for r in range(n):
             if skip[base + r] and h_t[r] > F0:

@@ -57,8 +57,9 @@ N_FACES = 6
 def point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag, offset_ulps, i):
     """Sample i's shadow ray to a point light at (lx, ly, lz) (light_mag: its
     largest |coordinate|), from the light to the sample's lifted point pushed
-    off the surface: (unit direction, distance, active), inactive where the
-    smooth normal faces away from the light or the distance is 0."""
+    off the surface: (unit direction, distance, t_max), t_max the distance,
+    or -1 (inactive) where the smooth normal faces away from the light or
+    the distance is 0."""
     qx, qy, qz = lifted[0, i], lifted[1, i], lifted[2, i]
     tx, ty, tz = lx - qx, ly - qy, lz - qz
     facing = smooth_n[0, i] * tx + smooth_n[1, i] * ty + smooth_n[2, i] * tz > F0
@@ -70,18 +71,18 @@ def point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag, offset_
     dz = qz + geo_n[2, i] * off - lz
     dist = np.sqrt(dx * dx + dy * dy + dz * dz)
     inv = F1 / dist if dist > F0 else F0
-    return dx * inv, dy * inv, dz * inv, dist, facing & (dist > F0)
+    return dx * inv, dy * inv, dz * inv, dist, dist if (facing & (dist > F0)) else -F1
 
 
 @helper
 def directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i):
     """Sample i's shadow ray toward a directional light travelling along the
-    unit (lx, ly, lz): (origin pushed off the surface, active), inactive
-    where the smooth normal faces away from the light."""
+    unit (lx, ly, lz): (origin pushed off the surface, t_max), t_max inf,
+    or -1 (inactive) where the smooth normal faces away from the light."""
     facing = smooth_n[0, i] * lx + smooth_n[1, i] * ly + smooth_n[2, i] * lz < F0
     off = offset_ulps * ULP * mag[i]
     return (lifted[0, i] + geo_n[0, i] * off, lifted[1, i] + geo_n[1, i] * off,
-            lifted[2, i] + geo_n[2, i] * off, facing)
+            lifted[2, i] + geo_n[2, i] * off, INF if facing else -F1)
 
 
 @parallel_arith_kernel
@@ -97,8 +98,8 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
     if kind == 0:
         light_mag = max(abs(lx), abs(ly), abs(lz))
         for i in prange(n):
-            dx, dy, dz, dist, active = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
-                                                       offset_ulps, i)
+            dx, dy, dz, dist, t_far = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
+                                                      offset_ulps, i)
             ray_o[0, i] = lx
             ray_o[1, i] = ly
             ray_o[2, i] = lz
@@ -106,7 +107,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[1, i] = dy
             ray_d[2, i] = dz
             t_min[i] = dist * SHADOW_T_MIN_FRACTION
-            t_max[i] = dist if active else -F1
+            t_max[i] = t_far
             # cube-map face of the direction and its two coordinates on it
             ax, ay, az = abs(dx), abs(dy), abs(dz)
             x_major = (ax >= ay) & (ax >= az)
@@ -128,7 +129,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
         vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
         for i in prange(n):
-            ox, oy, oz, active = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i)
+            ox, oy, oz, t_far = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i)
             ray_o[0, i] = ox
             ray_o[1, i] = oy
             ray_o[2, i] = oz
@@ -136,7 +137,7 @@ def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             ray_d[1, i] = -ly
             ray_d[2, i] = -lz
             t_min[i] = F0
-            t_max[i] = INF if active else -F1
+            t_max[i] = t_far
             face[i] = 0
             key_s[i] = ox * ux + oy * uy + oz * uz
             key_t[i] = ox * vx + oy * vy + oz * vz
