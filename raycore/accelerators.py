@@ -105,13 +105,14 @@ class BvhAccel:
         _, c = bvh_light_visibility(self.bvh, rays, vis)
         return Counters.of(c)
 
-    def trace_light(self, surface, kind, light_vec, vis, skip=None):
-        """(Counters, active rays): vis[i] = 1 where sample i of a camera
-        pass's Surface sees the light. Its shadow rays are made in the
-        packets, in the samples' order, with no light-space sort: the
-        gather's 32x32-pixel blocks are coherent as they are (README,
-        Performance). Structures without this method get LightRays."""
-        n, c = bvh_sample_visibility(self.bvh, surface, kind, light_vec, vis, skip)
+    def trace_lights(self, surface, lights, rows, vis, skip=None):
+        """(Counters, active rays): vis[rows[j], i] = 1 where sample i of a
+        camera pass's Surface sees light j (lights (m, 4): kind, x, y, z).
+        The shadow rays are made in the packets, in the samples' order,
+        with no light-space sort: the gather's 32x32-pixel blocks are
+        coherent as they are (README, The BVH). Structures without this
+        method get LightRays, a light at a time."""
+        n, c = bvh_sample_visibility(self.bvh, surface, lights, rows, vis, skip)
         return Counters.of(c), n
 
     def trace_rays(self, origins, dirs, t_min=None, t_max=None, any_hit=False) -> Hits:

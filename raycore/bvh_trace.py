@@ -145,13 +145,13 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
 
 
 @kernel
-def _light_worker(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, n_packets,
+def _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, n_packets,
                   vis, counters):
-    """One thread's share of trace_light_samples (see _batch_worker)."""
+    """One thread's share of trace_light_samples (see _batch_worker): for
+    each packet of samples, every light in turn, so that the samples are
+    read from memory once, not once per light."""
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
     n_samples = mag.shape[0]
-    mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
-    light_mag = max(abs(lx), max(abs(ly), abs(lz)))
     live = 0
     while True:
         p = next_tile(queue, n_packets)
@@ -159,31 +159,39 @@ def _light_worker(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ul
             break
         base = p * PACKET
         n = min(PACKET, n_samples - base)
-        live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
-                                 geo_n, smooth_n, mag, offset_ulps, skip)
-        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, p)
-        # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
-        for r in range(n):
-            vis[base + r] = F1 if h_t[r] >= ray[TMIN, r] else F0
+        for j in range(rows.shape[0]):
+            kind = int(lights[j, 0])
+            lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
+            light_mag = max(abs(lx), max(abs(ly), abs(lz)))
+            live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
+                                     geo_n, smooth_n, mag, offset_ulps, skip)
+            mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, p)
+            # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
+            row = rows[j]
+            for r in range(n):
+                vis[row, base + r] = F1 if h_t[r] >= ray[TMIN, r] else F0
     return live
 
 
 @parallel_kernel
-def trace_light_samples(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, n_workers,
+def trace_light_samples(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, n_workers,
                         vis, counters):
-    """Visibility of one light (kind 0: point at (lx, ly, lz); 1: directional
-    along it) from every surface sample: vis[i] = 1 when sample i's shadow
-    ray reaches the light, 0 when it is occluded, faces away or skip[i] (when
-    skip is not empty). The rays are made in the packets, PACKET consecutive
-    samples each (a camera pass's samples come in 32x32-pixel blocks, so a
-    packet's are neighbours), instead of being written out by light_rays and
-    read back: 44 bytes a sample moved instead of ~120, and no sort. Returns
-    how many rays were active. counters: one row per packet."""
+    """Visibility of lights (m, 4) (kind 0: point at (x, y, z); 1:
+    directional along it) from every surface sample: vis[rows[j], i] = 1
+    when sample i's shadow ray reaches light j, 0 when it is occluded,
+    faces away or skip[i] (when skip is not empty). The rays are made in
+    the packets, PACKET consecutive samples each (a camera pass's samples
+    come in 32x32-pixel blocks, so a packet's are neighbours), instead of
+    being written out by light_rays and read back: 44 bytes a sample moved
+    per light instead of ~120, and no sort; a packet's samples serve every
+    light while they are in cache. Returns how many rays were active.
+    counters: one row per packet."""
     n_packets = (mag.shape[0] + PACKET - 1) // PACKET
     queue = new_queue()
     live = 0
     for _w in prange(n_workers):
-        live += _light_worker(bvh, kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue,
+        live += _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue,
                               n_packets, vis, counters)
     return live
 
@@ -264,16 +272,17 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
 NO_SKIP = np.zeros(0, np.bool_)
 
 
-def bvh_sample_visibility(bvh: Bvh, surface, kind, light_vec, vis, skip=None):
-    """Visibility (1 lit, 0 shadowed or facing away) of one light from every
-    sample of a camera pass's Surface, its shadow rays made and traced in
-    the samples' order (trace_light_samples), and (active rays, counters)."""
+def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):
+    """Visibility (1 lit, 0 shadowed or facing away) of lights (m, 4) (the
+    light table's kind, x, y, z) from every sample of a camera pass's
+    Surface into vis[rows[j]], their shadow rays made and traced in the
+    samples' order (trace_light_samples), and (active rays, counters)."""
     n = surface.mag.shape[0]
     counters = _counters(n)
-    lx, ly, lz = (np.float32(c) for c in light_vec)
     skip = NO_SKIP if skip is None else np.ascontiguousarray(skip, np.bool_)
-    live = trace_light_samples(bvh, int(kind), lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
-                               surface.mag, np.float32(EPS_OFFSET_ULPS), skip, _workers(), vis, counters)
+    live = trace_light_samples(bvh, np.ascontiguousarray(lights, np.float32), np.asarray(rows, np.int64),
+                               surface.lifted, surface.geo_n, surface.smooth_n, surface.mag,
+                               np.float32(EPS_OFFSET_ULPS), skip, _workers(), vis, counters)
     return int(live), counters.sum(axis=0)
 
 

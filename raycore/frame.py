@@ -248,7 +248,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         """Shadow rays and shading of visible samples: rgb (3, n); with aov,
         the samples (one pass's) also offered to the AOVs. coherent: the
         samples are in a camera pass's gather order (32x32-pixel blocks),
-        which a structure with trace_light (the BVH) traces as they come;
+        which a structure with trace_lights (the BVH) traces as they come;
         the error budget's scattered samples, and every sample for the
         others, go through LightRays' light-space sort."""
         t0 = time.perf_counter()
@@ -256,23 +256,28 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         vis = buffers.work.take("vis", (n_lights, n_vis if cast_shadows else 0), capacity=n_lights * W * H)
         if cast_shadows:
             vis[[li for li in range(n_lights) if li not in lit]] = 0.0
-            direct = coherent and hasattr(scene.shadow_accel, "trace_light")
+            direct = coherent and hasattr(scene.shadow_accel, "trace_lights")
 
-            def trace(li, skip=None):
-                kind, light = int(shading.lights[li, 0]), shading.lights[li, 1:4]
-                if direct:
-                    c, n_active = scene.shadow_accel.trace_light(surface, kind, light, vis[li], skip)
-                else:
-                    rays = LightRays(surface, kind, light, buffers.work, skip)
-                    c, n_active = scene.shadow_accel.trace_shadows(rays, vis[li]), rays.n_active
+            def count(c, n_active, n_rows):
                 counters["shadow_rays"] += n_active
-                counters["shadow_rays_skipped"] += n_vis - n_active
+                counters["shadow_rays_skipped"] += n_rows * n_vis - n_active
                 counters["tri_tests"] += c.tests
                 counters["cells"] += c.visits
-            for rows in light_groups(shading.lights, lit):
-                probes = probe_rows(rows, cfg.light_probes)
-                for li in probes:
-                    trace(li)
+
+            def trace(rows, skip=None):
+                if direct:
+                    count(*scene.shadow_accel.trace_lights(surface, shading.lights[rows, :4], rows, vis, skip),
+                          len(rows))
+                    return
+                for li in rows:
+                    rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4], buffers.work,
+                                     skip)
+                    count(scene.shadow_accel.trace_shadows(rays, vis[li]), rays.n_active, 1)
+            groups = [(rows, probe_rows(rows, cfg.light_probes)) for rows in light_groups(shading.lights, lit)]
+            # every group's probes (every light that is not an area light's
+            # other emitter) at once
+            trace([li for _, probes in groups for li in probes])
+            for rows, probes in groups:
                 rest = [li for li in rows if li not in probes]
                 if not rest:
                     continue
@@ -280,8 +285,8 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
                 # the other emitters are taken to agree (no rays); else trace them
                 seen = vis[probes].sum(axis=0)
                 full, none = seen >= len(probes), seen <= 0
+                trace(rest, full | none)
                 for li in rest:
-                    trace(li, full | none)
                     vis[li][full] = 1.0
                     vis[li][none] = 0.0
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3

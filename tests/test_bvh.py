@@ -217,9 +217,10 @@ def test_shadow_rays_see_what_the_grid_sees(rng, kind):
     """The frame's shadow rays (LightRays, light-space order) through the BVH
     and through the grid: the same visibility, but for rays that graze an
     occluder's edge within float32 rounding (checked against brute force).
-    The BVH's own path (trace_light: the rays made in its packets, in the
+    The BVH's own path (trace_lights: the rays made in its packets, in the
     samples' order, the inactive ones dead) sees what it sees in
-    light-space order, but for such grazes; skipped samples get 0."""
+    light-space order, but for such grazes; skipped samples get 0, and
+    lights traced together see what each sees alone."""
     tv = np.ascontiguousarray(np.concatenate([
         soup(rng, 1500, spread=3.0, size=0.3),
         np.array([[-4, -2, -4, 4, -2, -4, 0, -2, 4], [-4, -2, 4, 4, -2, 4, 0, -2, -4]], np.float32)]))
@@ -239,17 +240,28 @@ def test_shadow_rays_see_what_the_grid_sees(rng, kind):
     assert rays.n_active > 1000 and 0.05 < 1 - vis_bvh[rays.t_max > 0].mean() < 0.95
     # the BVH's own path for a camera pass: the rays made in its packets, in
     # the samples' order; every vis[i] written (the buffer starts as NaN)
-    vis_direct = np.full(len(rays.t_max), np.nan, np.float32)
-    c, n_active = bvh.trace_light(surface, kind, light, vis_direct)
+    def direct(lights, rows, n_rows, skip=None):
+        vis = np.full((n_rows, len(rays.t_max)), np.nan, np.float32)
+        c, n = bvh.trace_lights(surface, np.array(lights, np.float32), rows, vis, skip)
+        return vis, c, n
+    vis_d, c, n_active = direct([[kind, *light]], [0], 1)
+    vis_direct = vis_d[0]
     assert n_active == rays.n_active and c.packets >= len(rays.t_max) // 128
     assert 0 < np.count_nonzero(rays.t_max <= 0) and not np.any(vis_direct[rays.t_max <= 0])  # facing away
     graze = list(np.nonzero(vis_direct != vis_bvh)[0])
     assert len(graze) <= 3, len(graze)
     skip = rng.random(len(rays.t_max)) < 0.3
-    vis_skip = np.full(len(rays.t_max), np.nan, np.float32)
-    _, n_left = bvh.trace_light(surface, kind, light, vis_skip, skip)
+    vis_skip, _, n_left = direct([[kind, *light]], [0], 1, skip)
     assert n_left == n_active - np.count_nonzero(skip & (rays.t_max > 0))
-    assert not np.any(vis_skip[skip]) and np.array_equal(vis_skip[~skip], vis_direct[~skip])
+    assert not np.any(vis_skip[0][skip]) and np.array_equal(vis_skip[0][~skip], vis_direct[~skip])
+    # two lights at once (the other kind too), into rows out of order: each
+    # row as that light alone, the row between untouched
+    d = np.array([-0.3, -1.0, -0.2], np.float32)
+    other = [1, *(d / np.linalg.norm(d))] if kind == 0 else [0, 2.0, 6.0, 3.0]
+    vis_other, _, n_other = direct([other], [0], 1)
+    vis_two, _, n_two = direct([other, [kind, *light]], [0, 2], 3)
+    assert np.array_equal(vis_two[0], vis_other[0]) and np.array_equal(vis_two[2], vis_direct)
+    assert np.all(np.isnan(vis_two[1])) and n_two == n_active + n_other
     differ = np.nonzero(vis_bvh != vis_grid)[0]
     assert len(differ) <= 3, len(differ)
     for i in list(differ) + graze:                     # each is a graze: a hit on an edge or corner
