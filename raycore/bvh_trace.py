@@ -117,7 +117,7 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
     if kind == 0:
         for r in range(n):
             dx, dy, dz, dist, t_far = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
-                                                      offset_ulps, base + r)
+                                                      offset_ulps, np.uint64(base + r))
             ray[OX, r], ray[OY, r], ray[OZ, r] = lx, ly, lz
             ray[DX, r], ray[DY, r], ray[DZ, r] = dx, dy, dz
             ray[TMIN, r] = dist * SHADOW_T_MIN_FRACTION
@@ -126,7 +126,7 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
     else:
         for r in range(n):
             ox, oy, oz, t_far = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
-                                                      base + r)
+                                                      np.uint64(base + r))
             ray[OX, r], ray[OY, r], ray[OZ, r] = ox, oy, oz
             ray[DX, r], ray[DY, r], ray[DZ, r] = -lx, -ly, -lz
             ray[TMIN, r] = F0
@@ -134,7 +134,7 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
             live += 1 if t_far > F0 else 0
     if skip.shape[0] > 0:
         for r in range(n):
-            if skip[base + r] and h_t[r] > F0:
+            if skip[np.uint64(base + r)] and h_t[r] > F0:
                 h_t[r] = -F1
                 live -= 1
     for r in range(n):
@@ -170,7 +170,7 @@ def _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, 
             # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
             row = rows[j]
             for r in range(n):
-                vis[row, base + r] = F1 if h_t[r] >= ray[TMIN, r] else F0
+                vis[row, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
     return live
 
 
