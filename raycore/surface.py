@@ -89,9 +89,10 @@ def sample_texture(tex_data, tex_info, tex, u, v):
     r = g = b = F0
     for k, wgt in ((ka + xa * 3, (F1 - ax) * (F1 - ay)), (ka + xb * 3, ax * (F1 - ay)),
                    (kb + xa * 3, (F1 - ax) * ay), (kb + xb * 3, ax * ay)):
-        r += wgt * tex_data[k]
-        g += wgt * tex_data[k + 1]
-        b += wgt * tex_data[k + 2]
+        ku = np.uint64(k)            # unsigned: no negative-index wraparound
+        r += wgt * tex_data[ku]
+        g += wgt * tex_data[ku + np.uint64(1)]
+        b += wgt * tex_data[ku + np.uint64(2)]
     return r, g, b
 
 
@@ -138,26 +139,30 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
             for y in range(y0, min(y0 + block, height)):
                 base = row_off[y]
                 for x in range(x0, min(x0 + block, width)):
-                    k = base + col_off[x]
+                    # unsigned indices: a signed one costs a negative-index
+                    # wraparound (a compare and a select) at every load and store
+                    k = np.uint64(base + col_off[x])
                     prim = hit_prim[k]
                     if prim < 0:
                         continue
-                    pixel[i] = y * width + x
-                    prim_out[i] = prim
+                    iu = np.uint64(i)
+                    pu = np.uint64(prim)
+                    pixel[iu] = y * width + x
+                    prim_out[iu] = prim
                     b1 = hit_b1[k]
                     b2 = hit_b2[k]
                     b0 = F1 - b1 - b2
                     dx, dy, dz = primary_dir(cam, x, y, jx, jy)
-                    view[0, i] = dx
-                    view[1, i] = dy
-                    view[2, i] = dz
-                    depth[i] = hit_t[k] * (dx * cam[16] + dy * cam[17] + dz * cam[18])
+                    view[0, iu] = dx
+                    view[1, iu] = dy
+                    view[2, iu] = dz
+                    depth[iu] = hit_t[k] * (dx * cam[16] + dy * cam[17] + dz * cam[18])
                     # point and unit geometric normal, turned to the viewer; the
                     # largest vertex coordinate scales the point's float32 error
-                    px, py, pz, gx, gy, gz = surface_point(tri_verts, prim, b1, b2)
+                    px, py, pz, gx, gy, gz = surface_point(tri_verts, pu, b1, b2)
                     m = F0
                     for c in range(9):
-                        m = max(m, abs(tri_verts[prim, c]))
+                        m = max(m, abs(tri_verts[pu, c]))
                     side = F1
                     if gx * dx + gy * dy + gz * dz > F0:
                         gx, gy, gz = -gx, -gy, -gz
@@ -165,15 +170,15 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
                     # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
                     qx = qy = qz = F0
                     sx = sy = sz = F0
-                    i0 = faces[prim, 0] if smooth else 0
-                    i1 = faces[prim, 1] if smooth else 0
-                    i2 = faces[prim, 2] if smooth else 0
+                    i0 = np.uint64(faces[pu, 0] if smooth else 0)
+                    i1 = np.uint64(faces[pu, 1] if smooth else 0)
+                    i2 = np.uint64(faces[pu, 2] if smooth else 0)
                     for c in range(3 if smooth else 0):
                         w = b0 if c == 0 else (b1 if c == 1 else b2)
                         v = i0 if c == 0 else (i1 if c == 1 else i2)
                         nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
-                        d = ((px - tri_verts[prim, 3 * c]) * nx + (py - tri_verts[prim, 3 * c + 1]) * ny
-                             + (pz - tri_verts[prim, 3 * c + 2]) * nz)
+                        d = ((px - tri_verts[pu, 3 * c]) * nx + (py - tri_verts[pu, 3 * c + 1]) * ny
+                             + (pz - tri_verts[pu, 3 * c + 2]) * nz)
                         lift = -w * min(d, F0)
                         qx += lift * nx
                         qy += lift * ny
@@ -187,13 +192,13 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
                     else:
                         sx, sy, sz = gx, gy, gz
                     lx, ly, lz = px + qx, py + qy, pz + qz
-                    store3(point, i, px, py, pz)
-                    store3(lifted, i, lx, ly, lz)
-                    mag[i] = max(m, abs(lx), abs(ly), abs(lz))
-                    store3(geo_n, i, gx, gy, gz)
-                    store3(smooth_n, i, sx, sy, sz)
+                    store3(point, iu, px, py, pz)
+                    store3(lifted, iu, lx, ly, lz)
+                    mag[iu] = max(m, abs(lx), abs(ly), abs(lz))
+                    store3(geo_n, iu, gx, gy, gz)
+                    store3(smooth_n, iu, sx, sy, sz)
                     # material, texture applied
-                    mat = tri_material[prim]
+                    mat = np.uint64(tri_material[pu])
                     kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]
                     tex = int(materials[mat, 5])
                     if tex >= 0 and has_uv and smooth:
@@ -203,11 +208,11 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
                         kr *= tr
                         kg *= tg
                         kb *= tb
-                    albedo[0, i] = kr
-                    albedo[1, i] = kg
-                    albedo[2, i] = kb
-                    ks[i] = materials[mat, 3]
-                    shininess[i] = materials[mat, 4]
+                    albedo[0, iu] = kr
+                    albedo[1, iu] = kg
+                    albedo[2, iu] = kb
+                    ks[iu] = materials[mat, 3]
+                    shininess[iu] = materials[mat, 4]
                     i += 1
 
 
