@@ -11,6 +11,7 @@ Why these flags:
   `a*b - c*d` is not antisymmetric, which would break the watertight edge tests.
 """
 import numba
+from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
@@ -30,6 +31,7 @@ kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMAT
 helper = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMATH, inline="always")
 parallel_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                        fastmath=SAFE_FASTMATH)
+arith_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)
 parallel_arith_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                              fastmath=ARITH_FASTMATH)
 
@@ -59,3 +61,18 @@ def set_threads(n: int) -> int:
     n = limit if n <= 0 else min(n, limit)
     numba.set_num_threads(n)
     return n
+
+
+@intrinsic
+def cycle_count(typingctx):
+    """The CPU's cycle counter (llvm.readcyclecounter: the time-stamp counter
+    on x86, 0 where a target has none): how a kernel that runs several
+    phases in one sweep tells their shares of its time apart."""
+    sig = types.int64()
+
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(ir.IntType(64), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
+        return builder.call(fn, [])
+
+    return sig, codegen

@@ -17,8 +17,11 @@ from .shadow_rays import directional_light_ray, point_light_ray
 from .tile_queue import new_queue, next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
-           "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "trace_batch", "trace_camera_bvh",
-           "trace_light_samples"]
+           "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "scratch", "trace_batch",
+           "trace_block_lights", "trace_camera_bvh", "trace_light_samples"]
+
+
+NO_SKIP = np.zeros(0, np.bool_)
 
 
 @helper
@@ -42,7 +45,7 @@ def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, i
 
 
 @helper
-def _scratch():
+def scratch():
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty((6, 3), np.float32),
             np.empty((6, 5), np.float32), np.empty(STACK, np.int64))
@@ -55,7 +58,7 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
     none are left. A plain function, called once per thread: the parallel
     region stays a call, which compiles in half the time of the whole loop
     inside it (numba analyses a prange body's every statement)."""
-    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
     while True:
         p = next_tile(queue, n_packets)
         if p < 0:
@@ -144,13 +147,33 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
     return live
 
 
+@helper
+def _light_packet(bvh, lights, rows, base, n, lifted, geo_n, smooth_n, mag, offset_ulps, skip, vis, counters,
+                  row, ray, h_t, h_b1, h_b2, prim, ia, planes, stack):
+    """Samples base..base+n-1 (one packet): their shadow rays to every light
+    in turn, while the samples are in cache, into vis[rows[j]]. Returns how
+    many rays were active."""
+    live = 0
+    for j in range(rows.shape[0]):
+        kind = int(lights[j, 0])
+        lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
+        light_mag = max(abs(lx), max(abs(ly), abs(lz)))
+        live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
+                                 geo_n, smooth_n, mag, offset_ulps, skip)
+        mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, row)
+        # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
+        out = rows[j]
+        for r in range(n):
+            vis[out, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
+    return live
+
+
 @kernel
 def _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, n_packets,
                   vis, counters):
-    """One thread's share of trace_light_samples (see _batch_worker): for
-    each packet of samples, every light in turn, so that the samples are
-    read from memory once, not once per light."""
-    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+    """One thread's share of trace_light_samples (see _batch_worker)."""
+    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
     n_samples = mag.shape[0]
     live = 0
     while True:
@@ -158,19 +181,23 @@ def _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, 
         if p < 0:
             break
         base = p * PACKET
-        n = min(PACKET, n_samples - base)
-        for j in range(rows.shape[0]):
-            kind = int(lights[j, 0])
-            lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
-            light_mag = max(abs(lx), max(abs(ly), abs(lz)))
-            live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
-                                     geo_n, smooth_n, mag, offset_ulps, skip)
-            mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
-            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, p)
-            # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
-            row = rows[j]
-            for r in range(n):
-                vis[row, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
+        live += _light_packet(bvh, lights, rows, base, min(PACKET, n_samples - base), lifted, geo_n, smooth_n,
+                              mag, offset_ulps, skip, vis, counters, p, ray, h_t, h_b1, h_b2, prim, ia, planes,
+                              stack)
+    return live
+
+
+@kernel
+def trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters, row,
+                       ray, h_t, h_b1, h_b2, prim, ia, planes, stack):
+    """trace_light_samples for one block's samples 0..n-1 (buffers of
+    shade_blocks, which stay in cache), on the calling thread, in packets
+    of PACKET; counters row `row`. Returns how many rays were active."""
+    live = 0
+    for base in range(0, n, PACKET):
+        live += _light_packet(bvh, lights, rows, base, min(PACKET, n - base), lifted, geo_n, smooth_n, mag,
+                              offset_ulps, NO_SKIP, vis, counters, row, ray, h_t, h_b1, h_b2, prim, ia, planes,
+                              stack)
     return live
 
 
@@ -205,7 +232,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, n_workers, out_t, out_prim
     n_tiles = tiles_x * ((height + side - 1) // side)
     queue = new_queue()
     for _w in prange(n_workers):
-        ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _scratch()
+        ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
         while True:
             p = next_tile(queue, n_tiles)
             if p < 0:
@@ -269,7 +296,6 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
     return vis, counters.sum(axis=0)
 
 
-NO_SKIP = np.zeros(0, np.bool_)
 
 
 def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):

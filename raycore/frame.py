@@ -14,10 +14,12 @@ from .accelerators import KD_PACKET, BvhAccel, GridAccel, KdAccel
 from .adaptive import camera_rays_of, refine
 from .camera import camera_basis, thin_lens
 from .config import ADAPTIVE_SPP_CAP, SHADOW_ACCEL, RenderConfig
+from .counters import Counters
 from .kdtree_build import build_kdtree
 from .sampling import sample_offsets
 from .scene_grid import SceneGrid
 from .shade import shade_samples, write_pixels
+from .shade_blocks import shade_image
 from .shadow_rays import LightRays
 from .shutter_lens import budget_times_lens, plain_times_lens
 from .surface import Surface, visible_surface
@@ -244,6 +246,26 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["tri_tests"] += c.tests
         counters["fallback_rays"] += c.fallback_rays
 
+    def count_shadow_rays(c, n_active, n_rows, n_vis):
+        counters["shadow_rays"] += n_active
+        counters["shadow_rays_skipped"] += n_rows * n_vis - n_active
+        counters["tri_tests"] += c.tests
+        counters["cells"] += c.visits
+
+    # the lights in groups (an area light's emitters together) and the rows
+    # traced for every sample first (each group's probes)
+    groups = ([(rows, probe_rows(rows, cfg.light_probes)) for rows in light_groups(shading.lights, lit)]
+              if cast_shadows else [])
+    first_rows = [li for _, probes in groups for li in probes]
+
+    def one_sweep():
+        """Whether this pass's hits can go to pixels in one sweep
+        (shade_blocks.py): no AOVs, and no shadows or BVH shadows whose
+        every ray is traced for every sample (no area light's emitters
+        waiting for its probes)."""
+        return aovs is None and (not cast_shadows or (isinstance(scene.shadow_accel, BvhAccel)
+                                                       and all(len(r) == len(p) for r, p in groups)))
+
     def shade_surface(surface, aov=True, coherent=True):
         """Shadow rays and shading of visible samples: rgb (3, n); with aov,
         the samples (one pass's) also offered to the AOVs. coherent: the
@@ -258,25 +280,18 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
             vis[[li for li in range(n_lights) if li not in lit]] = 0.0
             direct = coherent and hasattr(scene.shadow_accel, "trace_lights")
 
-            def count(c, n_active, n_rows):
-                counters["shadow_rays"] += n_active
-                counters["shadow_rays_skipped"] += n_rows * n_vis - n_active
-                counters["tri_tests"] += c.tests
-                counters["cells"] += c.visits
-
             def trace(rows, skip=None):
                 if direct:
-                    count(*scene.shadow_accel.trace_lights(surface, shading.lights[rows, :4], rows, vis, skip),
-                          len(rows))
+                    count_shadow_rays(*scene.shadow_accel.trace_lights(surface, shading.lights[rows, :4], rows,
+                                                                       vis, skip), len(rows), n_vis)
                     return
                 for li in rows:
                     rays = LightRays(surface, int(shading.lights[li, 0]), shading.lights[li, 1:4], buffers.work,
                                      skip)
-                    count(scene.shadow_accel.trace_shadows(rays, vis[li]), rays.n_active, 1)
-            groups = [(rows, probe_rows(rows, cfg.light_probes)) for rows in light_groups(shading.lights, lit)]
+                    count_shadow_rays(scene.shadow_accel.trace_shadows(rays, vis[li]), rays.n_active, 1, n_vis)
             # every group's probes (every light that is not an area light's
             # other emitter) at once
-            trace([li for _, probes in groups for li in probes])
+            trace(first_rows)
             for rows, probes in groups:
                 rest = [li for li in rows if li not in probes]
                 if not rest:
@@ -319,6 +334,19 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         counters["primary_packets"] += c.packets
         counters["primary_visits"] += c.visits
         counters["primary_tests"] += c.tests
+        if one_sweep():
+            t0 = time.perf_counter()
+            sweep = shade_image(scene.cam, jitter, hits, layout, scene.tri_verts, geom.faces, scene.normals,
+                                geom.tri_material, shading.materials, geom.uvs, shading.tex_data, shading.tex_info,
+                                shading.lights, scene.shadow_accel.bvh if cast_shadows else None, first_rows,
+                                cfg.ambient, bg, 1.0 / len(offsets), not single, rgba, z)
+            dt = (time.perf_counter() - t0) * 1e3
+            # the sweep's time split by its threads' cycles spent on shadow rays
+            timings["shadow_ms"] += dt * sweep.shadow_share
+            timings["shade_ms"] += dt * (1.0 - sweep.shadow_share)
+            if cast_shadows:
+                count_shadow_rays(Counters.of(sweep.counters), sweep.shadow_rays, len(first_rows), sweep.samples)
+            continue
         surface = gather(jitter, hits.t, hits.prim, hits.b1, hits.b2, layout)
         rgb = shade_surface(surface)
         t0 = time.perf_counter()

@@ -15,16 +15,80 @@ written by one scatter at the end.
 import numpy as np
 from numba import prange
 
-from ._jit import parallel_arith_kernel
+from ._jit import arith_kernel, helper, parallel_arith_kernel, parallel_kernel
 from .fast_pow import pow_unit
 
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
 INF = np.float32(np.inf)
-_CHUNK = 4096
+CHUNK = 4096
 
 
-@parallel_arith_kernel
+@arith_kernel
+def shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis, ambient, i0, i1,
+               out_rgb, spec_w, cos_h):
+    """Colour of samples i0..i1-1 (see shade_samples); spec_w and cos_h:
+    scratch of at least i1 - i0 floats. Its own compiled function, called
+    once a chunk by shade_samples and once a block by shade_blocks."""
+    m = i1 - i0
+    # row slices, indexed by a counter from 0: LLVM can then drop the
+    # negative-index checks and vectorize (an index i0 + k could not)
+    px, py, pz = point[0, i0:i1], point[1, i0:i1], point[2, i0:i1]
+    nx_, ny_, nz_ = normal[0, i0:i1], normal[1, i0:i1], normal[2, i0:i1]
+    vx, vy, vz = view[0, i0:i1], view[1, i0:i1], view[2, i0:i1]
+    ar, ag, ab = albedo[0, i0:i1], albedo[1, i0:i1], albedo[2, i0:i1]
+    ks_c = ks[i0:i1]
+    shin_c = shininess[i0:i1]
+    r_out, g_out, b_out = out_rgb[0, i0:i1], out_rgb[1, i0:i1], out_rgb[2, i0:i1]
+    for k in range(m):
+        r_out[k] = ambient * ar[k]
+        g_out[k] = ambient * ag[k]
+        b_out[k] = ambient * ab[k]
+    for li in range(lights.shape[0]):
+        point_light = lights[li, 0] == F0
+        lx, ly, lz = lights[li, 1], lights[li, 2], lights[li, 3]
+        cr, cg, cb = lights[li, 4], lights[li, 5], lights[li, 6]
+        vis_c = vis[li, i0:i1] if use_vis else spec_w      # spec_w: unread stand-in
+        n_spec = 0
+        for k in range(m):
+            if point_light:
+                tx = lx - px[k]
+                ty = ly - py[k]
+                tz = lz - pz[k]
+                d2 = tx * tx + ty * ty + tz * tz
+                atten = F1 / d2 if d2 > F0 else F0
+            else:
+                tx, ty, tz = -lx, -ly, -lz
+                d2 = tx * tx + ty * ty + tz * tz
+                atten = F1
+            inv = F1 / np.sqrt(d2) if d2 > F0 else F0
+            tx, ty, tz = tx * inv, ty * inv, tz * inv
+            nx, ny, nz = nx_[k], ny_[k], nz_[k]
+            ndl = nx * tx + ny * ty + nz * tz
+            w = atten * (vis_c[k] if use_vis else F1)
+            w = w if ndl > F0 else F0
+            r_out[k] += cr * w * ar[k] * ndl
+            g_out[k] += cg * w * ag[k] * ndl
+            b_out[k] += cb * w * ab[k] * ndl
+            # Blinn-Phong: half vector between the light and the viewer
+            hx, hy, hz = tx - vx[k], ty - vy[k], tz - vz[k]
+            hl2 = hx * hx + hy * hy + hz * hz
+            ndh = (nx * hx + ny * hy + nz * hz) / np.sqrt(hl2) if hl2 > F0 else F0
+            sw = w * ks_c[k] if ndh > F0 else F0
+            spec_w[k] = sw
+            cos_h[k] = ndh
+            n_spec += 1 if sw > F0 else 0
+        if n_spec == 0:
+            continue
+        for k in range(m):
+            # branch-free: pow_unit is finite in every lane, and 0 where the weight is
+            spec = spec_w[k] * pow_unit(cos_h[k], shin_c[k])
+            r_out[k] += cr * spec
+            g_out[k] += cg * spec
+            b_out[k] += cb * spec
+
+
+@parallel_kernel
 def shade_samples(point, normal, view, albedo, ks, shininess, lights, vis, use_vis, ambient,
                   out_rgb):
     """Colour (3, n) of every surface sample. vis (n_light, n) is read only
@@ -36,68 +100,48 @@ def shade_samples(point, normal, view, albedo, ks, shininess, lights, vis, use_v
     the first loop kept all of it from vectorizing: 8 ms -> 4 ms on the hand
     scene), with fast_pow.pow_unit, which vectorizes too (4.8 -> ~2 ms)."""
     n = point.shape[1]
-    n_lights = lights.shape[0]
-    for c in prange((n + _CHUNK - 1) // _CHUNK):
-        i0 = c * _CHUNK
-        i1 = min(n, i0 + _CHUNK)
-        m = i1 - i0
-        # row slices, indexed by a counter from 0: LLVM can then drop the
-        # negative-index checks and vectorize (an index i0 + k could not)
-        px, py, pz = point[0, i0:i1], point[1, i0:i1], point[2, i0:i1]
-        nx_, ny_, nz_ = normal[0, i0:i1], normal[1, i0:i1], normal[2, i0:i1]
-        vx, vy, vz = view[0, i0:i1], view[1, i0:i1], view[2, i0:i1]
-        ar, ag, ab = albedo[0, i0:i1], albedo[1, i0:i1], albedo[2, i0:i1]
-        ks_c = ks[i0:i1]
-        shin_c = shininess[i0:i1]
-        r_out, g_out, b_out = out_rgb[0, i0:i1], out_rgb[1, i0:i1], out_rgb[2, i0:i1]
-        spec_w = np.empty(m, np.float32)
-        cos_h = np.empty(m, np.float32)
-        for k in range(m):
-            r_out[k] = ambient * ar[k]
-            g_out[k] = ambient * ag[k]
-            b_out[k] = ambient * ab[k]
-        for li in range(n_lights):
-            point_light = lights[li, 0] == F0
-            lx, ly, lz = lights[li, 1], lights[li, 2], lights[li, 3]
-            cr, cg, cb = lights[li, 4], lights[li, 5], lights[li, 6]
-            vis_c = vis[li, i0:i1] if use_vis else spec_w      # spec_w: unread stand-in
-            n_spec = 0
-            for k in range(m):
-                if point_light:
-                    tx = lx - px[k]
-                    ty = ly - py[k]
-                    tz = lz - pz[k]
-                    d2 = tx * tx + ty * ty + tz * tz
-                    atten = F1 / d2 if d2 > F0 else F0
-                else:
-                    tx, ty, tz = -lx, -ly, -lz
-                    d2 = tx * tx + ty * ty + tz * tz
-                    atten = F1
-                inv = F1 / np.sqrt(d2) if d2 > F0 else F0
-                tx, ty, tz = tx * inv, ty * inv, tz * inv
-                nx, ny, nz = nx_[k], ny_[k], nz_[k]
-                ndl = nx * tx + ny * ty + nz * tz
-                w = atten * (vis_c[k] if use_vis else F1)
-                w = w if ndl > F0 else F0
-                r_out[k] += cr * w * ar[k] * ndl
-                g_out[k] += cg * w * ag[k] * ndl
-                b_out[k] += cb * w * ab[k] * ndl
-                # Blinn-Phong: half vector between the light and the viewer
-                hx, hy, hz = tx - vx[k], ty - vy[k], tz - vz[k]
-                hl2 = hx * hx + hy * hy + hz * hz
-                ndh = (nx * hx + ny * hy + nz * hz) / np.sqrt(hl2) if hl2 > F0 else F0
-                sw = w * ks_c[k] if ndh > F0 else F0
-                spec_w[k] = sw
-                cos_h[k] = ndh
-                n_spec += 1 if sw > F0 else 0
-            if n_spec == 0:
-                continue
-            for k in range(m):
-                # branch-free: pow_unit is finite in every lane, and 0 where the weight is
-                spec = spec_w[k] * pow_unit(cos_h[k], shin_c[k])
-                r_out[k] += cr * spec
-                g_out[k] += cg * spec
-                b_out[k] += cb * spec
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        i0 = c * CHUNK
+        i1 = min(n, i0 + CHUNK)
+        spec_w = np.empty(i1 - i0, np.float32)
+        cos_h = np.empty(i1 - i0, np.float32)
+        shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis, ambient, i0, i1,
+                   out_rgb, spec_w, cos_h)
+
+
+@helper
+def put_background(p, bg, weight, accumulate, out_rgba, out_z):
+    """Pixel p as a miss: the background, A = 0, Z = +inf (accumulate: add
+    weight * (background, 0) and leave Z)."""
+    if accumulate:
+        out_rgba[p, 0] += weight * bg[0]
+        out_rgba[p, 1] += weight * bg[1]
+        out_rgba[p, 2] += weight * bg[2]
+    else:
+        out_rgba[p, 0] = bg[0]
+        out_rgba[p, 1] = bg[1]
+        out_rgba[p, 2] = bg[2]
+        out_rgba[p, 3] = F0
+        out_z[p] = INF
+
+
+@helper
+def put_sample(p, rgb, i, depth, bg, weight, accumulate, out_rgba, out_z):
+    """Sample i (colour rgb[:, i], Z depth[i]) into pixel p, which
+    put_background has set: overwrite (A = 1), or accumulate: take back the
+    background it was given, add weight * (colour, 1), keep the nearest Z."""
+    if accumulate:
+        out_rgba[p, 0] += weight * (rgb[0, i] - bg[0])
+        out_rgba[p, 1] += weight * (rgb[1, i] - bg[1])
+        out_rgba[p, 2] += weight * (rgb[2, i] - bg[2])
+        out_rgba[p, 3] += weight
+        out_z[p] = min(out_z[p], depth[i])
+    else:
+        out_rgba[p, 0] = rgb[0, i]
+        out_rgba[p, 1] = rgb[1, i]
+        out_rgba[p, 2] = rgb[2, i]
+        out_rgba[p, 3] = F1
+        out_z[p] = depth[i]
 
 
 @parallel_arith_kernel
@@ -107,32 +151,21 @@ def write_pixels(pixel, rgb, depth, bg, weight, accumulate, out_rgba, out_z):
     per pixel; the caller zeroes RGBA and sets Z to +inf first): add weight *
     (colour, 1) of hits and weight * (background, 0) of misses, keep the
     nearest Z."""
-    n_pix = out_z.shape[0]
-    for p in prange(n_pix):
-        if accumulate:
-            out_rgba[p, 0] += weight * bg[0]
-            out_rgba[p, 1] += weight * bg[1]
-            out_rgba[p, 2] += weight * bg[2]
-        else:
-            out_rgba[p, 0] = bg[0]
-            out_rgba[p, 1] = bg[1]
-            out_rgba[p, 2] = bg[2]
-            out_rgba[p, 3] = F0
-            out_z[p] = INF
+    for p in prange(out_z.shape[0]):
+        put_background(p, bg, weight, accumulate, out_rgba, out_z)
     n = pixel.shape[0]
-    for c in prange((n + _CHUNK - 1) // _CHUNK):
-        for i in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
-            p = pixel[i]
-            if accumulate:
-                # this sample hit: take back the background it was given above
-                out_rgba[p, 0] += weight * (rgb[0, i] - bg[0])
-                out_rgba[p, 1] += weight * (rgb[1, i] - bg[1])
-                out_rgba[p, 2] += weight * (rgb[2, i] - bg[2])
-                out_rgba[p, 3] += weight
-                out_z[p] = min(out_z[p], depth[i])
-            else:
-                out_rgba[p, 0] = rgb[0, i]
-                out_rgba[p, 1] = rgb[1, i]
-                out_rgba[p, 2] = rgb[2, i]
-                out_rgba[p, 3] = F1
-                out_z[p] = depth[i]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            put_sample(pixel[i], rgb, i, depth, bg, weight, accumulate, out_rgba, out_z)
+
+
+@arith_kernel
+def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumulate, out_rgba, out_z):
+    """write_pixels for one block: the block x block pixels at (x0, y0) of
+    an image `width` wide, and samples 0..n-1 (the block's)."""
+    height = out_z.shape[0] // width
+    for y in range(y0, min(y0 + block, height)):
+        for x in range(x0, min(x0 + block, width)):
+            put_background(y * width + x, bg, weight, accumulate, out_rgba, out_z)
+    for i in range(n):
+        put_sample(pixel[i], rgb, i, depth, bg, weight, accumulate, out_rgba, out_z)

@@ -45,17 +45,12 @@ def _bilinear(img, u, v):
             + (1 - ax) * ay * at(y0 + 1, x0) + ax * ay * at(y0 + 1, x0 + 1))
 
 
-def test_shaded_frame_matches_a_numpy_oracle():
-    """Every pixel of render_frame against Lambert + Blinn-Phong written out in
-    numpy from the hits: smooth normals, 1/d^2 falloff, a texture, a point
-    and a directional light, visibility from the (separately tested) shadow pass."""
-    from conftest import icosphere_mesh, tri_verts_of
-    from raycore.camera import camera_basis
-    from raycore.config import RenderConfig
-    from raycore.frame import CameraPose, Geometry, Shading, render_frame
-    from raycore.mesh import vertex_face_csr, vertex_normals
-    from raycore.scene_grid import SceneGrid
-    from raycore.trace import trace_camera, trace_light
+def sphere_on_floor():
+    """A textured, shiny sphere over a grey floor, a point and a directional
+    light: (Geometry, Shading, (uvs, tex, materials, tri_material))."""
+    from conftest import icosphere_mesh
+    from raycore.frame import Geometry, Shading
+    from raycore.mesh import vertex_face_csr
 
     v, f = icosphere_mesh(2, 1.0)
     floor = np.array([[-4, -1.2, -4], [4, -1.2, -4], [4, -1.2, 4], [-4, -1.2, 4]], np.float32)
@@ -74,6 +69,23 @@ def test_shaded_frame_matches_a_numpy_oracle():
     shading = Shading(materials, tex.reshape(-1), np.array([[0, 4, 3]], np.int64), lights)
     vf = vertex_face_csr(faces, len(verts))
     geom = Geometry(verts, faces, tri_material, uvs, *vf)
+    return geom, shading, (uvs, tex, materials, tri_material)
+
+
+def test_shaded_frame_matches_a_numpy_oracle():
+    """Every pixel of render_frame against Lambert + Blinn-Phong written out in
+    numpy from the hits: smooth normals, 1/d^2 falloff, a texture, a point
+    and a directional light, visibility from the (separately tested) shadow pass."""
+    from conftest import tri_verts_of
+    from raycore.camera import camera_basis
+    from raycore.config import RenderConfig
+    from raycore.frame import CameraPose, render_frame
+    from raycore.mesh import vertex_normals
+    from raycore.scene_grid import SceneGrid
+    from raycore.trace import trace_camera, trace_light
+
+    geom, shading, (uvs, tex, materials, tri_material) = sphere_on_floor()
+    verts, faces, lights, vf = geom.vertices, geom.faces, shading.lights, (geom.vf_start, geom.vf_faces)
     w, h = 80, 64
     pose = CameraPose((0.5, 1.5, 4.0), (0.0, -0.3, 0.0), (0, 1, 0), 45.0)
     cfg = RenderConfig(width=w, height=h, packet=16, ambient=0.05, background=(0.1, 0.2, 0.3))

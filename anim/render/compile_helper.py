@@ -4,8 +4,9 @@ On a first run every kernel is compiled, one after another, on one core,
 while the other cores idle. The kernels split into two halves that need
 nothing of each other's results to be compiled: the camera half
 (interpolation, the structures' builds, the camera rays' traversal, and the
-image scatter and EXR write, which even the halves out) and the surface half (the
-visible-surface gather, the shadow rays and their traversal, shading). So
+EXR write's half floats, which even the halves out) and the surface half (the
+sweep of shade_blocks.py: the visible-surface gather, the shadow rays and
+their traversal, shading and the image's pixels). So
 the main process compiles the camera half while a helper process compiles
 the surface half on camera hits and a shadow BVH made up with the right
 types (`MadeUpHits`, `made_up_bvh`: nothing is built there); each writes its
@@ -29,7 +30,7 @@ from raycore.counters import Counters
 from raycore.trace import Hits, row_major_offsets
 
 # the surface half's kernels that tell whether the cache is cold
-_PROBES = ("raycore.surface:fill_surface", "raycore.shade:shade_samples", "raycore.bvh_trace:trace_light_samples")
+_PROBES = ("raycore.shade_blocks:shade_blocks",)
 
 
 def _cached(probe) -> bool:

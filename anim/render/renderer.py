@@ -14,7 +14,6 @@ from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_str
 from raycore.half_float import to_half
 from raycore.mesh import vertex_face_csr
 from raycore.scene_grid import SceneGrid
-from raycore.shade import write_pixels
 
 
 class SceneRenderer:
@@ -105,8 +104,8 @@ def warm_up(scene, shading, cfg, t):
 
     On a cold cache a helper process compiles the surface half meanwhile
     (compile_helper.py): this process first compiles the camera half (with
-    the structures' builds, the image's scatter and the EXR write's half
-    floats, to even the halves out), waits for the helper, and then loads its
+    the structures' builds and the EXR write's half floats, to even the
+    halves out), waits for the helper, and then loads its
     kernels (the zip layout among them) from the cache."""
     from . import compile_helper
     t0 = time.perf_counter()
@@ -118,12 +117,9 @@ def warm_up(scene, shading, cfg, t):
     if helper is not None:
         done = False
         try:
-            # the image's kernels first, which the helper reaches last: the
-            # scatter of shaded samples (none here) and the EXR write's half floats
-            rgba, z = renderer.buffers.image()
-            write_pixels(np.zeros(0, np.int32), np.zeros((3, 0), np.float32), np.zeros(0, np.float32),
-                         np.asarray(small.background, np.float32), np.float32(1.0), False, rgba, z)
-            to_half(rgba)          # the write's zip layout is the helper's (it loads after)
+            # the EXR write's half floats first, which the helper reaches last
+            # (the write's zip layout is the helper's: it loads after)
+            to_half(renderer.buffers.image()[0])
             renderer.trace_camera_only(t)
             renderer.trace_camera_only(t + dt)
             done = True

@@ -1,0 +1,140 @@
+"""A camera pass's hits turned into pixels in one sweep, block by block:
+gather a 32x32-pixel block's visible samples, trace their shadow rays
+through the BVH, shade them and write the block's pixels, while the
+block's rows (~110 KB for 1,024 samples) stay in the core's cache.
+
+The phase by phase path (surface.visible_surface, then the shadow pass,
+shade.shade_samples, shade.write_pixels) writes every sample's 26 values
+to memory and reads them back three times: ~270 bytes a sample, ~130 MB
+a frame on hand, at the ~9 GB/s the two cores of this machine kind write.
+Here each stage is the same compiled function that path calls (fill_block,
+bvh_trace.trace_block_lights, shade_rows, write_block), called once a block
+on buffers of the block's size.
+
+The frame takes this sweep for a pass whose samples need nothing else:
+shadows through the BVH (or none), every lit light traced for every sample
+(no area light's other emitters waiting for its probes) and no AOVs; the
+error budget's later passes, grid and kd-tree shadows and AOVs keep the
+phase by phase path. The sweep's time is split between the shadow and
+shade phases by the cycle counter (each thread counts the cycles it spent
+tracing shadow rays against all its cycles in the sweep).
+"""
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import prange
+
+from ._jit import cycle_count, kernel, parallel_kernel
+from .bvh_build import empty_bvh
+from .bvh_trace import scratch, trace_block_lights
+from .config import EPS_OFFSET_ULPS
+from .counters import N_COUNTERS
+from .shade import shade_rows, write_block
+from .surface import GATHER_BLOCK, fill_block
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
+
+F32 = np.float32
+# worker statistics: cycles in the sweep, cycles tracing shadow rays, active shadow rays, visible samples
+TOTAL, SHADOW, LIVE, SAMPLES = 0, 1, 2, 3
+NO_BVH = empty_bvh(1, 0)            # the tree's stand-in when there are no shadow rays
+
+
+@kernel
+def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
+                  tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
+                  offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats):
+    """One thread's share of shade_image: blocks pulled from `queue` until
+    none are left, each through the four stages on this thread's buffers."""
+    start = cycle_count()
+    width = col_off.shape[0]
+    blocks_x, n_blocks = tile_count(width, row_off.shape[0], GATHER_BLOCK)
+    m = GATHER_BLOCK * GATHER_BLOCK
+    pixel = np.empty(m, np.int32)
+    prim = np.empty(m, np.int32)
+    point = np.empty((3, m), F32)
+    lifted = np.empty((3, m), F32)
+    geo_n = np.empty((3, m), F32)
+    smooth_n = np.empty((3, m), F32)
+    view = np.empty((3, m), F32)
+    depth = np.empty(m, F32)
+    mag = np.empty(m, F32)
+    albedo = np.empty((3, m), F32)
+    ks = np.empty(m, F32)
+    shininess = np.empty(m, F32)
+    # rows of unlit lights stay 0 (they are never traced)
+    vis = np.zeros((lights.shape[0], m if shadows else 0), F32)
+    rgb = np.empty((3, m), F32)
+    spec_w = np.empty(m, F32)
+    cos_h = np.empty(m, F32)
+    ray, h_t, h_b1, h_b2, prim_r, ia, planes, stack = scratch()
+    while True:
+        b = next_tile(queue, n_blocks)
+        if b < 0:
+            break
+        n = fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, GATHER_BLOCK, b, blocks_x,
+                       tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, 0,
+                       pixel, prim, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess)
+        stats[SAMPLES] += n
+        if shadows:
+            t0 = cycle_count()
+            stats[LIVE] += trace_block_lights(bvh, shadow_lights, rows, n, lifted, geo_n, smooth_n, mag,
+                                              offset_ulps, vis, counters, b, ray, h_t, h_b1, h_b2, prim_r, ia,
+                                              planes, stack)
+            stats[SHADOW] += cycle_count() - t0
+        shade_rows(point, smooth_n, view, albedo, ks, shininess, lights, vis, shadows, ambient, 0, n, rgb,
+                   spec_w, cos_h)
+        x0, y0 = tile_corner(b, blocks_x, GATHER_BLOCK)
+        write_block(pixel, rgb, depth, n, x0, y0, GATHER_BLOCK, width, bg, weight, accumulate, rgba, z)
+    stats[TOTAL] += cycle_count() - start
+
+
+@parallel_kernel
+def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
+                 tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
+                 offset_ulps, shadows, ambient, bg, weight, accumulate, rgba, z, counters, stats):
+    """Every GATHER_BLOCK^2-pixel block of a camera pass (hits of pixel
+    (x, y) at row_off[y] + col_off[x]) gathered, shadowed (when shadows:
+    lights shadow_lights (m, 4) into vis rows `rows`, as
+    bvh_trace.trace_light_samples), shaded with every light of `lights`
+    (shade.py's table) and written into rgba (H*W, 4) and z (H*W,) as
+    shade.write_pixels does. One worker a row of stats (n_workers, 4):
+    TOTAL, SHADOW cycles, LIVE shadow rays, visible SAMPLES; counters
+    (n_blocks, N_COUNTERS), a row a block."""
+    queue = new_queue()
+    for w in prange(stats.shape[0]):
+        _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
+                      tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
+                      offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats[w])
+
+
+class Sweep(NamedTuple):
+    """What one shade_image call did."""
+    samples: int              # visible samples (camera rays that hit)
+    shadow_rays: int          # active shadow rays
+    counters: np.ndarray      # (N_COUNTERS,) the shadow packets' counters, summed
+    shadow_share: float       # the share of the sweep's time spent tracing shadow rays
+
+
+def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
+                tex_info, lights, bvh, rows, ambient, bg, weight, accumulate, rgba, z) -> Sweep:
+    """One camera pass's hits into the image (see shade_blocks): shadows to
+    lights[rows] through `bvh` (None: no shadow rays), shading with every
+    row of `lights` (unlit rows are dark)."""
+    row_off, col_off = layout
+    _, n_blocks = tile_count(col_off.shape[0], row_off.shape[0], GATHER_BLOCK)
+    shadows = bvh is not None
+    rows = np.asarray(rows if shadows else [], np.int64)
+    counters = np.zeros((n_blocks if shadows else 1, N_COUNTERS), np.int64)
+    stats = np.zeros((numba.get_num_threads(), 4), np.int64)
+    shade_blocks(cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off,
+                 tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
+                 bvh if shadows else NO_BVH, lights, np.ascontiguousarray(lights[rows, :4]), rows,
+                 F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg, F32(weight), accumulate, rgba, z, counters,
+                 stats)
+    total = stats[:, TOTAL].sum()
+    return Sweep(int(stats[:, SAMPLES].sum()), int(stats[:, LIVE].sum()), counters.sum(axis=0),
+                 float(stats[:, SHADOW].sum() / total) if total > 0 else 0.0)
+
+
+__all__ = ["Sweep", "shade_blocks", "shade_image"]
