@@ -26,6 +26,9 @@ from .surface import Surface, visible_surface
 from .trace import camera_buffers, row_major_offsets
 from .workspace import Workspace
 
+# False: every pass takes the phase by phase path (to measure the sweep against it)
+ONE_SWEEP = True
+
 __all__ = ["KD_PACKET", "CameraPose", "FrameBuffers", "FrameResult", "Geometry", "Shading", "render_frame"]
 
 
@@ -263,7 +266,7 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         (shade_blocks.py): no AOVs, and no shadows or BVH shadows whose
         every ray is traced for every sample (no area light's emitters
         waiting for its probes)."""
-        return aovs is None and (not cast_shadows or (isinstance(scene.shadow_accel, BvhAccel)
+        return ONE_SWEEP and aovs is None and (not cast_shadows or (isinstance(scene.shadow_accel, BvhAccel)
                                                        and all(len(r) == len(p) for r, p in groups)))
 
     def shade_surface(surface, aov=True, coherent=True):
