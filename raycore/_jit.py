@@ -14,6 +14,8 @@ import numba
 from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
+from numba.core.cpu import CPUTargetOptions
+from numba.core.options import TargetOptions
 from numba.extending import intrinsic
 
 from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
@@ -29,6 +31,13 @@ kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMAT
 # numba-IR level. A real call costs an atomic incref/decref per array argument
 # (NRT reference counting), measured at 22% of traversal time before this.
 helper = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMATH, inline="always")
+# numba tells LLVM nothing of whether two array arguments overlap, so a loop
+# that loads through an index (a gather) and stores elsewhere stays scalar.
+# `noalias` (numba's own flag, which it sets on a parallel loop's body when
+# it sees no aliasing) promises that the arguments do not overlap: for
+# kernels whose callers pass distinct arrays only.
+CPUTargetOptions.noalias = TargetOptions.Mapping("noalias")
+vector_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH, noalias=True)
 parallel_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                        fastmath=SAFE_FASTMATH)
 arith_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)

@@ -50,6 +50,7 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
     width = col_off.shape[0]
     blocks_x, n_blocks = tile_count(width, row_off.shape[0], GATHER_BLOCK)
     m = GATHER_BLOCK * GATHER_BLOCK
+    found = np.empty((3, m), np.int64)
     pixel = np.empty(m, np.int32)
     prim = np.empty(m, np.int32)
     point = np.empty((3, m), F32)
@@ -74,7 +75,7 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
             break
         n = fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, GATHER_BLOCK, b, blocks_x,
                        tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, 0,
-                       pixel, prim, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess)
+                       found, pixel, prim, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess)
         stats[SAMPLES] += n
         if shadows:
             t0 = cycle_count()

@@ -27,7 +27,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._jit import arith_kernel, helper, parallel_arith_kernel, parallel_kernel
+from ._jit import helper, parallel_arith_kernel, parallel_kernel, vector_kernel
 from .camera import primary_dir
 from .tile_queue import tile_corner, tile_count
 from .triangle import surface_point
@@ -113,22 +113,25 @@ def count_hits(hit_prim, row_off, col_off, block, block_count):
         block_count[b] = c
 
 
-@arith_kernel
+@vector_kernel
 def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, block, b, blocks_x,
-               tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, start,
+               tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, start, found,
                pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess):
     """Fill the Surface rows of block b's visible samples (block x block
     pixels, row by row), from row `start` on; returns the row after the
-    last. Its own compiled function, called once a block: fill_surface
-    writes the whole pass's rows, shade_blocks.shade_image a block's rows
-    into buffers that stay in cache. Normals are turned to the viewer's
-    side; the lift and the smooth normal use the vertex normals turned the
-    same way."""
+    last. found: (3, block^2) i64 scratch. Its own compiled function,
+    called once a block: fill_surface writes the whole pass's rows,
+    shade_blocks.shade_image a block's rows into buffers that stay in
+    cache. Normals are turned to the viewer's side; the lift and the smooth
+    normal use the vertex normals turned the same way.
+
+    In three loops: the block's hits found (their index and pixel x, y), then
+    every row filled in a loop without branches, which LLVM vectorizes
+    (AVX-512 gathers; vector_kernel tells it that the arrays do not
+    overlap), then the textures applied to the textured rows."""
     width = col_off.shape[0]
     height = row_off.shape[0]
-    has_uv = uvs.shape[0] > 0
-    smooth = faces.shape[0] > 0          # vertex normals given: lift and smooth normal
-    i = start
+    n = 0
     x0, y0 = tile_corner(b, blocks_x, block)
     for y in range(y0, min(y0 + block, height)):
         base = row_off[y]
@@ -136,40 +139,44 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
             # unsigned indices: a signed one costs a negative-index
             # wraparound (a compare and a select) at every load and store
             k = np.uint64(base + col_off[x])
-            prim = hit_prim[k]
-            if prim < 0:
-                continue
-            iu = np.uint64(i)
-            pu = np.uint64(prim)
-            pixel[iu] = y * width + x
-            prim_out[iu] = prim
-            b1 = hit_b1[k]
-            b2 = hit_b2[k]
-            b0 = F1 - b1 - b2
-            dx, dy, dz = primary_dir(cam, x, y, jx, jy)
-            view[0, iu] = dx
-            view[1, iu] = dy
-            view[2, iu] = dz
-            depth[iu] = hit_t[k] * (dx * cam[16] + dy * cam[17] + dz * cam[18])
-            # point and unit geometric normal, turned to the viewer; the
-            # largest vertex coordinate scales the point's float32 error
-            px, py, pz, gx, gy, gz = surface_point(tri_verts, pu, b1, b2)
-            m = F0
-            for c in range(9):
-                m = max(m, abs(tri_verts[pu, c]))
-            side = F1
-            if gx * dx + gy * dy + gz * dz > F0:
-                gx, gy, gz = -gx, -gy, -gz
-                side = -F1
-            # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
-            qx = qy = qz = F0
-            sx = sy = sz = F0
-            i0 = np.uint64(faces[pu, 0] if smooth else 0)
-            i1 = np.uint64(faces[pu, 1] if smooth else 0)
-            i2 = np.uint64(faces[pu, 2] if smooth else 0)
-            for c in range(3 if smooth else 0):
+            if hit_prim[k] >= 0:
+                found[0, np.uint64(n)] = k
+                found[1, np.uint64(n)] = x
+                found[2, np.uint64(n)] = y
+                n += 1
+    smooth = faces.shape[0] > 0      # vertex normals given: lift and smooth normal
+    for j in range(n):
+        k = np.uint64(found[0, j])
+        x = found[1, j]
+        y = found[2, j]
+        iu = np.uint64(start + j)
+        prim = hit_prim[k]
+        pu = np.uint64(prim)
+        pixel[iu] = y * width + x
+        prim_out[iu] = prim
+        b1 = hit_b1[k]
+        b2 = hit_b2[k]
+        b0 = F1 - b1 - b2
+        dx, dy, dz = primary_dir(cam, x, y, jx, jy)
+        view[0, iu] = dx
+        view[1, iu] = dy
+        view[2, iu] = dz
+        depth[iu] = hit_t[k] * (dx * cam[16] + dy * cam[17] + dz * cam[18])
+        # point and unit geometric normal, turned to the viewer; the largest
+        # vertex coordinate scales the point's float32 error
+        px, py, pz, gx, gy, gz = surface_point(tri_verts, pu, b1, b2)
+        m = F0
+        for c in range(9):
+            m = max(m, abs(tri_verts[pu, c]))
+        side = -F1 if gx * dx + gy * dy + gz * dz > F0 else F1
+        gx, gy, gz = side * gx, side * gy, side * gz
+        # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
+        qx = qy = qz = F0
+        sx = sy = sz = F0
+        for c in range(3):
+            if smooth:
                 w = b0 if c == 0 else (b1 if c == 1 else b2)
-                v = i0 if c == 0 else (i1 if c == 1 else i2)
+                v = np.uint64(faces[pu, c])
                 nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
                 d = ((px - tri_verts[pu, 3 * c]) * nx + (py - tri_verts[pu, 3 * c + 1]) * ny
                      + (pz - tri_verts[pu, 3 * c + 2]) * nz)
@@ -180,35 +187,42 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                 sx += w * nx
                 sy += w * ny
                 sz += w * nz
-            sl = np.sqrt(sx * sx + sy * sy + sz * sz)
-            if sl > F0:
-                sx, sy, sz = sx / sl, sy / sl, sz / sl
-            else:
-                sx, sy, sz = gx, gy, gz
-            lx, ly, lz = px + qx, py + qy, pz + qz
-            store3(point, iu, px, py, pz)
-            store3(lifted, iu, lx, ly, lz)
-            mag[iu] = max(m, abs(lx), abs(ly), abs(lz))
-            store3(geo_n, iu, gx, gy, gz)
-            store3(smooth_n, iu, sx, sy, sz)
-            # material, texture applied
-            mat = np.uint64(tri_material[pu])
-            kr, kg, kb = materials[mat, 0], materials[mat, 1], materials[mat, 2]
+        sl = np.sqrt(sx * sx + sy * sy + sz * sz)
+        inv = F1 / sl if sl > F0 else F0
+        sx, sy, sz = (sx * inv, sy * inv, sz * inv) if sl > F0 else (gx, gy, gz)
+        lx, ly, lz = px + qx, py + qy, pz + qz
+        store3(point, iu, px, py, pz)
+        store3(lifted, iu, lx, ly, lz)
+        mag[iu] = max(m, max(abs(lx), max(abs(ly), abs(lz))))
+        store3(geo_n, iu, gx, gy, gz)
+        store3(smooth_n, iu, sx, sy, sz)
+        # material (a texture is applied after, by the caller)
+        mat = np.uint64(tri_material[pu])
+        albedo[0, iu] = materials[mat, 0]
+        albedo[1, iu] = materials[mat, 1]
+        albedo[2, iu] = materials[mat, 2]
+        ks[iu] = materials[mat, 3]
+        shininess[iu] = materials[mat, 4]
+    if uvs.shape[0] > 0 and faces.shape[0] > 0 and tex_info.shape[0] > 0:
+        for j in range(n):
+            iu = np.uint64(start + j)
+            mat = np.uint64(tri_material[np.uint64(prim_out[iu])])
             tex = int(materials[mat, 5])
-            if tex >= 0 and has_uv and smooth:
-                tu = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
-                tv = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
-                tr, tg, tb = sample_texture(tex_data, tex_info, tex, tu, tv)
-                kr *= tr
-                kg *= tg
-                kb *= tb
-            albedo[0, iu] = kr
-            albedo[1, iu] = kg
-            albedo[2, iu] = kb
-            ks[iu] = materials[mat, 3]
-            shininess[iu] = materials[mat, 4]
-            i += 1
-    return i
+            if tex < 0:
+                continue
+            k = np.uint64(found[0, j])
+            pu = np.uint64(prim_out[iu])
+            b1 = hit_b1[k]
+            b2 = hit_b2[k]
+            b0 = F1 - b1 - b2
+            i0, i1, i2 = np.uint64(faces[pu, 0]), np.uint64(faces[pu, 1]), np.uint64(faces[pu, 2])
+            tu = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+            tv = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+            tr, tg, tb = sample_texture(tex_data, tex_info, tex, tu, tv)
+            albedo[0, iu] *= tr
+            albedo[1, iu] *= tg
+            albedo[2, iu] *= tb
+    return start + n
 
 
 @parallel_kernel
@@ -225,10 +239,11 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
     # blocks dealt out in turn: prange splits statically, and the visible
     # surface is rarely spread evenly over the image's halves
     for t in prange(n_threads):
+        found = np.empty((3, block * block), np.int64)
         for b in range(t, n_blocks, n_threads):
             fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, block, b, blocks_x,
                        tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
-                       block_start[b], pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag,
+                       block_start[b], found, pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag,
                        albedo, ks, shininess)
 
 
