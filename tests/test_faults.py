@@ -426,6 +426,23 @@ def test_many_stale_claims_are_one_warning(tmp_path):
     assert leftovers(out) == [] and len(exr_frames(out)) == 6
 
 
+def test_a_resume_with_nothing_left_to_render_removes_a_dead_claim(tmp_path):
+    """A render killed after its last frame was in place but before it
+    released that frame's claim (seen once in the kill loop above): the
+    next --resume has no frame to render and still removes the claim."""
+    import socket
+    out = tmp_path / "out"
+    args = ["render", str(DEMO), "-o", str(out), "--frames", "0:1", "--res", "24x16", "-q"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (out / ".frame_0001.exr.claim").write_text(f"{socket.gethostname()} {dead.pid} 0\n")
+    res = CliRunner().invoke(main, args + ["--resume"])
+    assert res.exit_code == 0, res.output
+    assert leftovers(out) == [] and len(exr_frames(out)) == 2
+    assert "removed" in res.output
+
+
 def test_a_summary_of_recovered_frames_only_has_an_unknown_median_write():
     """Every frame recovered from killed runs (write time unknown): the
     summary's median write is null, not 0 (the SIGKILL test above reaches

@@ -72,8 +72,12 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
                  if isinstance(r.get("crc32"), int)} if job.resume else {}
     todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn, checksums)
     stale = todo.stale                   # existing files to be rendered again (not whole), filled as checked
-    for directory in [todo.directory] if todo.first() is not None else []:
+    directory = todo.directory
+    if todo.first() is not None:
         writable_dir(directory, "frames")
+    # also when every frame is done: a render killed after writing its last
+    # frame but before releasing that frame's claim left the claim behind
+    if directory is not None and directory.is_dir():
         removed = remove_stale_temps(directory)
         if len(removed) == 1:
             warn(f"removed {directory / removed[0]}, left by a render that was killed")

@@ -93,6 +93,8 @@ def remove_stale_temps(directory: Path) -> list:
                 removed.append(entry.name)
             except FileNotFoundError:
                 pass
+            except PermissionError:      # a directory we only read (nothing left to render there)
+                pass
     return removed
 
 
