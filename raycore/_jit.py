@@ -14,9 +14,13 @@ import numba
 from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
-from numba.core.cpu import CPUTargetOptions
-from numba.core.options import TargetOptions
 from numba.extending import intrinsic
+
+try:
+    from numba.core.cpu import CPUTargetOptions
+    from numba.core.options import TargetOptions
+except ImportError:              # see vector_kernel
+    CPUTargetOptions = TargetOptions = None
 
 from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
 
@@ -35,9 +39,15 @@ helper = njit(cache=True, nogil=True, error_model="numpy", fastmath=SAFE_FASTMAT
 # that loads through an index (a gather) and stores elsewhere stays scalar.
 # `noalias` (numba's own flag, which it sets on a parallel loop's body when
 # it sees no aliasing) promises that the arguments do not overlap: for
-# kernels whose callers pass distinct arrays only.
-CPUTargetOptions.noalias = TargetOptions.Mapping("noalias")
-vector_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH, noalias=True)
+# kernels whose callers pass distinct arrays only. It is not a decorator
+# option, so it is made one here; should numba's internals move, the
+# kernels compile without it (scalar loops, the same results).
+try:
+    CPUTargetOptions.noalias = TargetOptions.Mapping("noalias")
+    _NOALIAS = {"noalias": True}
+except AttributeError:
+    _NOALIAS = {}
+vector_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH, **_NOALIAS)
 parallel_kernel = njit(cache=True, nogil=True, parallel=True, error_model="numpy",
                        fastmath=SAFE_FASTMATH)
 arith_kernel = njit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)
