@@ -48,7 +48,11 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
     none are left, each through the four stages on this thread's buffers."""
     start = cycle_count()
     width = col_off.shape[0]
-    blocks_x, n_blocks = tile_count(width, row_off.shape[0], GATHER_BLOCK)
+    # typed int64, not as literals: the stages then share their compiled
+    # specialisations with the phase by phase path's calls
+    block = np.int64(GATHER_BLOCK)
+    zero = np.int64(0)
+    blocks_x, n_blocks = tile_count(width, row_off.shape[0], block)
     m = GATHER_BLOCK * GATHER_BLOCK
     found = np.empty((3, m), np.int64)
     pixel = np.empty(m, np.int32)
@@ -73,8 +77,8 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
         b = next_tile(queue, n_blocks)
         if b < 0:
             break
-        n = fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, GATHER_BLOCK, b, blocks_x,
-                       tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, 0,
+        n = fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, block, b, blocks_x,
+                       tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info, zero,
                        found, pixel, prim, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess)
         stats[SAMPLES] += n
         if shadows:
@@ -83,10 +87,10 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
                                               offset_ulps, vis, counters, b, ray, h_t, h_b1, h_b2, prim_r, ia,
                                               planes, stack)
             stats[SHADOW] += cycle_count() - t0
-        shade_rows(point, smooth_n, view, albedo, ks, shininess, lights, vis, shadows, ambient, 0, n, rgb,
+        shade_rows(point, smooth_n, view, albedo, ks, shininess, lights, vis, shadows, ambient, zero, n, rgb,
                    spec_w, cos_h)
-        x0, y0 = tile_corner(b, blocks_x, GATHER_BLOCK)
-        write_block(pixel, rgb, depth, n, x0, y0, GATHER_BLOCK, width, bg, weight, accumulate, rgba, z)
+        x0, y0 = tile_corner(b, blocks_x, block)
+        write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumulate, rgba, z)
     stats[TOTAL] += cycle_count() - start
 
 
