@@ -296,8 +296,6 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
     return vis, counters.sum(axis=0)
 
 
-
-
 def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):
     """Visibility (1 lit, 0 shadowed or facing away) of lights (m, 4) (the
     light table's kind, x, y, z) from every sample of a camera pass's

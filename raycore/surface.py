@@ -206,12 +206,11 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
     if uvs.shape[0] > 0 and faces.shape[0] > 0 and tex_info.shape[0] > 0:
         for j in range(n):
             iu = np.uint64(start + j)
-            mat = np.uint64(tri_material[np.uint64(prim_out[iu])])
-            tex = int(materials[mat, 5])
+            pu = np.uint64(prim_out[iu])
+            tex = int(materials[np.uint64(tri_material[pu]), 5])
             if tex < 0:
                 continue
             k = np.uint64(found[0, j])
-            pu = np.uint64(prim_out[iu])
             b1 = hit_b1[k]
             b2 = hit_b2[k]
             b0 = F1 - b1 - b2

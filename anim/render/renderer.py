@@ -4,8 +4,6 @@ compile time measured apart by a warm-up; the work memory a render needs,
 checked before it starts."""
 import time
 
-import numpy as np
-
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import SHADOW_ACCEL, RenderConfig
