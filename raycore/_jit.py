@@ -10,6 +10,8 @@ Why these flags:
   (FMA fusion) is left out of the traversal kernels on purpose: a fused
   `a*b - c*d` is not antisymmetric, which would break the watertight edge tests.
 """
+import os
+
 import numba
 from llvmlite import ir
 from numba import njit
@@ -26,6 +28,16 @@ from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
 
 # OpenMP measured faster than the default workqueue on this machine kind.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+# OpenMP's threads (libgomp's) spin for at most ~0.2 ms when a parallel loop
+# ends, not for up to milliseconds (its default, 300,000 turns): the drivers'
+# workers are Python threads (thread_pool.on_threads), and so are the EXR
+# encoder's, and a spinning OpenMP thread takes the core they need. 10,000
+# turns keep the build's back-to-back loops as fast as the default spin
+# (sleeping at once cost the grid and BVH update 0.3-0.6 ms a frame). Read
+# when numba first starts its threads, so set here, before any kernel
+# runs; the user's own OMP_WAIT_POLICY or GOMP_SPINCOUNT wins.
+if "OMP_WAIT_POLICY" not in os.environ:
+    os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 
 SAFE_FASTMATH = {"arcp", "nsz"}
 ARITH_FASTMATH = {"contract", "arcp", "nsz"}   # for kernels without edge tests

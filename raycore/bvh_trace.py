@@ -14,6 +14,7 @@ from .camera import primary_dir
 from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .counters import FALLBACK_RAYS, N_COUNTERS, PACKETS
 from .shadow_rays import directional_light_ray, point_light_ray
+from .thread_pool import on_threads
 from .tile_queue import new_queue, next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
@@ -52,12 +53,19 @@ def scratch():
 
 
 @kernel
-def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, vis_only, mode, queue,
-                  n_packets, want_hits, want_vis, out_t, out_prim, out_b1, out_b2, vis, counters):
-    """One thread's share of trace_batch: packets pulled from `queue` until
-    none are left. A plain function, called once per thread: the parallel
-    region stays a call, which compiles in half the time of the whole loop
-    inside it (numba analyses a prange body's every statement)."""
+def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, queue, out_t, out_prim,
+                out_b1, out_b2, vis, counters):
+    """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets of
+    PACKET consecutive entries, those this thread pulls from `queue` until
+    none are left (the wrappers below start one per thread,
+    thread_pool.on_threads). Writes the hits (out_*, global triangle ids,
+    when out_t is not empty) or the visibility (vis, when not empty: 1 =
+    nothing in (t_min, t_max)). mode SINGLE traces every ray alone.
+    counters: one row per packet."""
+    n_packets = (n_active + PACKET - 1) // PACKET
+    want_hits = out_t.shape[0] > 0
+    want_vis = vis.shape[0] > 0
+    vis_only = any_hit and want_vis and not want_hits
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
     while True:
         p = next_tile(queue, n_packets)
@@ -90,24 +98,6 @@ def _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit
                 out_t[i] = h_t[r] if k >= 0 else INF
                 out_b1[i] = h_b1[r]
                 out_b2[i] = h_b2[r]
-
-
-@parallel_kernel
-def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, n_workers,
-                out_t, out_prim, out_b1, out_b2, vis, counters):
-    """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets of
-    PACKET consecutive entries, pulled from the tile queue. Writes the hits
-    (out_*, global triangle ids, when out_t is not empty) or the visibility
-    (vis, when not empty: 1 = nothing in (t_min, t_max)). mode SINGLE traces
-    every ray alone. counters: one row per packet."""
-    n_packets = (n_active + PACKET - 1) // PACKET
-    queue = new_queue()
-    want_hits = out_t.shape[0] > 0
-    want_vis = vis.shape[0] > 0
-    vis_only = any_hit and want_vis and not want_hits
-    for _w in prange(n_workers):
-        _batch_worker(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, vis_only, mode, queue,
-                      n_packets, want_hits, want_vis, out_t, out_prim, out_b1, out_b2, vis, counters)
 
 
 @helper
@@ -170,11 +160,22 @@ def _light_packet(bvh, lights, rows, base, n, lifted, geo_n, smooth_n, mag, offs
 
 
 @kernel
-def _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, n_packets,
-                  vis, counters):
-    """One thread's share of trace_light_samples (see _batch_worker)."""
+def trace_light_samples(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue, vis,
+                        counters):
+    """Visibility of lights (m, 4) (kind 0: point at (x, y, z); 1:
+    directional along it) from the surface samples of the packets this
+    thread pulls from `queue` (bvh_sample_visibility starts one per
+    thread): vis[rows[j], i] = 1 when sample i's shadow ray reaches light
+    j, 0 when it is occluded, faces away or skip[i] (when skip is not
+    empty). The rays are made in the packets, PACKET consecutive samples
+    each (a camera pass's samples come in 32x32-pixel blocks, so a packet's
+    are neighbours), instead of being written out by light_rays and read
+    back: 44 bytes a sample moved per light instead of ~120, and no sort; a
+    packet's samples serve every light while they are in cache. Returns how
+    many rays were active. counters: one row per packet."""
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
     n_samples = mag.shape[0]
+    n_packets = (n_samples + PACKET - 1) // PACKET
     live = 0
     while True:
         p = next_tile(queue, n_packets)
@@ -198,28 +199,6 @@ def trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offse
         live += _light_packet(bvh, lights, rows, base, min(PACKET, n - base), lifted, geo_n, smooth_n, mag,
                               offset_ulps, NO_SKIP, vis, counters, row, ray, h_t, h_b1, h_b2, prim, ia, planes,
                               stack)
-    return live
-
-
-@parallel_kernel
-def trace_light_samples(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, n_workers,
-                        vis, counters):
-    """Visibility of lights (m, 4) (kind 0: point at (x, y, z); 1:
-    directional along it) from every surface sample: vis[rows[j], i] = 1
-    when sample i's shadow ray reaches light j, 0 when it is occluded,
-    faces away or skip[i] (when skip is not empty). The rays are made in
-    the packets, PACKET consecutive samples each (a camera pass's samples
-    come in 32x32-pixel blocks, so a packet's are neighbours), instead of
-    being written out by light_rays and read back: 44 bytes a sample moved
-    per light instead of ~120, and no sort; a packet's samples serve every
-    light while they are in cache. Returns how many rays were active.
-    counters: one row per packet."""
-    n_packets = (mag.shape[0] + PACKET - 1) // PACKET
-    queue = new_queue()
-    live = 0
-    for _w in prange(n_workers):
-        live += _light_worker(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps, skip, queue,
-                              n_packets, vis, counters)
     return live
 
 
@@ -280,6 +259,11 @@ def _workers():
     return numba.get_num_threads()
 
 
+def _queue():
+    """tile_queue's counter, for workers started from Python."""
+    return np.zeros(1, np.int64)
+
+
 def _counters(n_rays):
     return np.zeros((max(1, -(-n_rays // PACKET)), N_COUNTERS), np.int64)
 
@@ -291,8 +275,8 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
     vis[:] = 0.0
     counters = _counters(rays.n_active)
     mode = SHARED_ORIGIN if rays.shared_origin else SHARED_DIRECTION
-    trace_batch(bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
-                True, mode, _workers(), *NO_HITS, vis, counters)
+    on_threads(trace_batch, _workers(), bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min,
+               rays.t_max, True, mode, _queue(), *NO_HITS, vis, counters)
     return vis, counters.sum(axis=0)
 
 
@@ -304,10 +288,10 @@ def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):
     n = surface.mag.shape[0]
     counters = _counters(n)
     skip = NO_SKIP if skip is None else np.ascontiguousarray(skip, np.bool_)
-    live = trace_light_samples(bvh, np.ascontiguousarray(lights, np.float32), np.asarray(rows, np.int64),
-                               surface.lifted, surface.geo_n, surface.smooth_n, surface.mag,
-                               np.float32(EPS_OFFSET_ULPS), skip, _workers(), vis, counters)
-    return int(live), counters.sum(axis=0)
+    live = on_threads(trace_light_samples, _workers(), bvh, np.ascontiguousarray(lights, np.float32),
+                      np.asarray(rows, np.int64), surface.lifted, surface.geo_n, surface.smooth_n, surface.mag,
+                      np.float32(EPS_OFFSET_ULPS), skip, _queue(), vis, counters)
+    return int(sum(live)), counters.sum(axis=0)
 
 
 def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=False, mode=None):
@@ -328,9 +312,9 @@ def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=Fals
     t_max = np.full(n, np.inf, np.float32) if t_max is None else np.ascontiguousarray(t_max, np.float32)
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     counters = _counters(n)
-    trace_batch(bvh, np.arange(n, dtype=np.int32), n, np.ascontiguousarray(origins.T),
-                np.ascontiguousarray(dirs.T), t_min, t_max, any_hit, mode, _workers(), *out,
-                np.zeros(0, np.float32), counters)
+    on_threads(trace_batch, _workers(), bvh, np.arange(n, dtype=np.int32), n, np.ascontiguousarray(origins.T),
+               np.ascontiguousarray(dirs.T), t_min, t_max, any_hit, mode, _queue(), *out, np.zeros(0, np.float32),
+               counters)
     return (*out, counters.sum(axis=0))
 
 

@@ -58,11 +58,20 @@ def trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shar
 
 
 @kernel
-def _camera_worker(queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
-                   grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
-    """One thread's share of trace_primary: tiles pulled from the queue until
-    none is left. A kernel of its own: numba's parfor passes over a large
-    loop body cost compile time (0.5 s here, issue 21)."""
+def trace_primary(queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
+                  grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
+    """Closest hits of the camera rays (sub-pixel offset jx, jy) of the
+    tiles this thread pulls from `queue` until none is left (trace.py starts
+    one per thread, thread_pool.on_threads).
+
+    grid: grid_build.Grid over tri_verts. sw_*: packet-major hits
+    (n_packets, n_sub, S*S), packet (px, py) at index
+    (py // packet) * packets_x + px // packet, ray r of sub-packet j as in
+    sub_corner; each packet traces straight into its own slot (copying hits
+    out to row-major order inside the traversal cost a third of its time).
+    `unswizzle` turns them into row-major images. prim -1 = miss.
+    counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
+    """
     tiles_x, n_tiles = tile_count(width, height, tile_size)
     packets_x = (width + packet - 1) // packet
     rays, work, _t, _b1, _b2, _prim, sub, sub_active, sub_done, sub_skip, mailbox = \
@@ -92,25 +101,6 @@ def _camera_worker(queue, cam, width, height, jx, jy, packet, sub_size, tile_siz
                     walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
                          k_ref, w_end, sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
                          counters, tile, cull)
-
-
-@parallel_kernel
-def trace_primary(cam, width, height, jx, jy, packet, sub_size, tile_size, n_workers,
-                  grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
-    """Closest hits of the camera rays (sub-pixel offset jx, jy) for every pixel.
-
-    grid: grid_build.Grid over tri_verts. sw_*: packet-major hits
-    (n_packets, n_sub, S*S), packet (px, py) at index
-    (py // packet) * packets_x + px // packet, ray r of sub-packet j as in
-    sub_corner; each packet traces straight into its own slot (copying hits
-    out to row-major order inside the traversal cost a third of its time).
-    `unswizzle` turns them into row-major images. prim -1 = miss.
-    counters: (n_tiles, N_COUNTERS) int64, one row per tile (no shared writes).
-    """
-    queue = new_queue()
-    for _w in prange(n_workers):
-        _camera_worker(queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
-                       grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
 
 
 @helper

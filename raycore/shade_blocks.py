@@ -23,16 +23,15 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import prange
-
-from ._jit import cycle_count, kernel, parallel_kernel
+from ._jit import cycle_count, kernel
 from .bvh_build import empty_bvh
 from .bvh_trace import scratch, trace_block_lights
 from .config import EPS_OFFSET_ULPS
 from .counters import N_COUNTERS
 from .shade import shade_rows, write_block
 from .surface import GATHER_BLOCK, fill_block
-from .tile_queue import new_queue, next_tile, tile_corner, tile_count
+from .thread_pool import on_threads
+from .tile_queue import next_tile, tile_corner, tile_count
 
 F32 = np.float32
 # worker statistics: cycles in the sweep, cycles tracing shadow rays, active shadow rays, visible samples
@@ -41,11 +40,18 @@ NO_BVH = empty_bvh(1, 0)            # the tree's stand-in when there are no shad
 
 
 @kernel
-def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
-                  tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
-                  offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats):
-    """One thread's share of shade_image: blocks pulled from `queue` until
-    none are left, each through the four stages on this thread's buffers."""
+def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
+                 tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
+                 offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats):
+    """One thread's share of a camera pass's pixels (shade_image starts one
+    per thread): GATHER_BLOCK^2-pixel blocks pulled from `queue` until none
+    are left, each gathered (hits of pixel (x, y) at row_off[y] +
+    col_off[x]), shadowed (when shadows: lights shadow_lights (m, 4) into
+    vis rows `rows`, as bvh_trace.trace_light_samples), shaded with every
+    light of `lights` (shade.py's table) and written into rgba (H*W, 4) and
+    z (H*W,) as shade.write_pixels does, on this thread's buffers. stats
+    (4,): this worker's TOTAL and SHADOW cycles, LIVE shadow rays and
+    visible SAMPLES; counters (n_blocks, N_COUNTERS), a row a block."""
     start = cycle_count()
     width = col_off.shape[0]
     # typed int64, not as literals: the stages then share their compiled
@@ -94,25 +100,6 @@ def _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off
     stats[TOTAL] += cycle_count() - start
 
 
-@parallel_kernel
-def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
-                 tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
-                 offset_ulps, shadows, ambient, bg, weight, accumulate, rgba, z, counters, stats):
-    """Every GATHER_BLOCK^2-pixel block of a camera pass (hits of pixel
-    (x, y) at row_off[y] + col_off[x]) gathered, shadowed (when shadows:
-    lights shadow_lights (m, 4) into vis rows `rows`, as
-    bvh_trace.trace_light_samples), shaded with every light of `lights`
-    (shade.py's table) and written into rgba (H*W, 4) and z (H*W,) as
-    shade.write_pixels does. One worker a row of stats (n_workers, 4):
-    TOTAL, SHADOW cycles, LIVE shadow rays, visible SAMPLES; counters
-    (n_blocks, N_COUNTERS), a row a block."""
-    queue = new_queue()
-    for w in prange(stats.shape[0]):
-        _block_worker(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
-                      tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
-                      offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats[w])
-
-
 class Sweep(NamedTuple):
     """What one shade_image call did."""
     samples: int              # visible samples (camera rays that hit)
@@ -131,12 +118,14 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
     shadows = bvh is not None
     rows = np.asarray(rows if shadows else [], np.int64)
     counters = np.zeros((n_blocks if shadows else 1, N_COUNTERS), np.int64)
-    stats = np.zeros((numba.get_num_threads(), 4), np.int64)
-    shade_blocks(cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off,
-                 tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
-                 bvh if shadows else NO_BVH, lights, np.ascontiguousarray(lights[rows, :4]), rows,
-                 F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg, F32(weight), accumulate, rgba, z, counters,
-                 stats)
+    n_workers = numba.get_num_threads()
+    stats = np.zeros((n_workers, 4), np.int64)
+    queue = np.zeros(1, np.int64)           # tile_queue's counter
+    on_threads(shade_blocks, n_workers, cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1,
+               hits.b2, row_off, col_off, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
+               tex_info, bvh if shadows else NO_BVH, lights, np.ascontiguousarray(lights[rows, :4]), rows,
+               F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg, F32(weight), accumulate, queue, rgba, z,
+               counters, per_worker=stats)
     total = stats[:, TOTAL].sum()
     return Sweep(int(stats[:, SAMPLES].sum()), int(stats[:, LIVE].sum()), counters.sum(axis=0),
                  float(stats[:, SHADOW].sum() / total) if total > 0 else 0.0)

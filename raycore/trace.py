@@ -11,6 +11,7 @@ from .grid_drivers import trace_primary, trace_ray_batch
 from .packet_layout import swizzle_offsets, unswizzle
 from .shadow_rays import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
+from .thread_pool import on_threads
 from .tile_queue import tile_size_for
 
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
@@ -93,9 +94,9 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
         out = camera_buffers(width, height, packet)
     sw_t, sw_prim, sw_b1, sw_b2 = out.swizzled
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
-    trace_primary(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
-                  packet, sub, tile, threads, grid, tri_verts, _cull_eps(grid),
-                  sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
+    on_threads(trace_primary, threads, np.zeros(1, np.int64), cam, width, height, np.float32(jitter[0]),
+               np.float32(jitter[1]), packet, sub, tile, grid, tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1,
+               sw_b2, counters, cull)
     flat = (sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1))
     if not row_major:
         return Hits(*flat, counters.sum(axis=0))
