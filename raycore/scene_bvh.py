@@ -151,17 +151,7 @@ class SceneBvh:
         else:
             idx = self._moving_idx
             if len(idx):
-                b = self.bvh
-                cost = self._moving_cost
-                if self.soup:
-                    points = tri_verts.reshape(-1, 3)
-                elif vertices is None:
-                    raise ValueError("a SceneBvh made with faces refits from the vertices: pass them")
-                else:
-                    points = np.ascontiguousarray(vertices, np.float32)
-                refit(points, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
-                      self._moving_roots, b.node, b.node_i, self.leaf_faces, b.verts, self.part, cost)
-                self.cost[idx] = cost
+                self.refit_moving(tri_verts, vertices)
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0
             t1 = time.perf_counter()
@@ -177,6 +167,22 @@ class SceneBvh:
                       # the largest SAH cost of a refit tree over its cost at its last build
                       "bvh_sah_growth": growth}
         return self.bvh
+
+    def refit_moving(self, tri_verts, vertices=None):
+        """Every moving tree's boxes refit to these positions (as update),
+        their SAH costs into self.cost. On a SceneBvh without trees it does
+        nothing but compile the refit for the frame's types (the cold
+        cache's helper process, anim/render/compile_helper.py)."""
+        b = self.bvh
+        if self.soup:
+            points = tri_verts.reshape(-1, 3)
+        elif vertices is None:
+            raise ValueError("a SceneBvh made with faces refits from the vertices: pass them")
+        else:
+            points = np.ascontiguousarray(vertices, np.float32)
+        refit(points, self.front, self.front_end, self.front_start, self.tops, self.tops_start,
+              self._moving_roots, b.node, b.node_i, self.leaf_faces, b.verts, self.part, self._moving_cost)
+        self.cost[self._moving_idx] = self._moving_cost
 
     def _top_level(self):
         """Nodes 0..2G-1: a binned-SAH tree over the G roots; its leaves are

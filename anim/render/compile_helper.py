@@ -6,8 +6,8 @@ nothing of each other's results to be compiled: the camera half
 (interpolation, the structures' builds, the camera rays' traversal, and the
 EXR write's half floats, which even the halves out) and the surface half (the
 sweep of shade_blocks.py: the visible-surface gather, the shadow rays and
-their traversal, shading and the image's pixels). So
-the main process compiles the camera half while a helper process compiles
+their traversal, shading and the image's pixels, and the shadow BVH's
+refit, which evens the halves out). So the main process compiles the camera half while a helper process compiles
 the surface half on camera hits and a shadow BVH made up with the right
 types (`MadeUpHits`, `made_up_bvh`: nothing is built there); each writes its
 kernels to numba's on-disk cache, and the main process's full warm-up then
@@ -133,13 +133,15 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
     """Run two frames of the scene with made-up camera hits, made-up
     vertices (interpolation is the camera half's) and, for BVH shadows, a
     made-up tree (the builds are the camera half's, and so is the EXR
-    write's half-float conversion; its zip layout is this half's). {kernel: s}."""
+    write's half-float conversion; its zip layout and the shadow BVH's
+    refit, on no trees, are this half's). {kernel: s}."""
     from anim.render.compile_watch import watching
     from anim.render.renderer import SceneRenderer
     from anim.render.settings import shading_of
     from anim.scene import AnimatedScene
     from raycore.config import SHADOW_ACCEL
     from raycore.frame import CameraPose, Geometry, render_frame
+    from raycore.scene_bvh import SceneBvh
 
     scene = AnimatedScene(scene_path, camera)
     shading = shading_of(scene)
@@ -150,8 +152,10 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
         camera_hits = MadeUpHits(scene.faces.shape[0])
         shadow_bvh = None
         if (cfg.shadow_accel or SHADOW_ACCEL) == "bvh":
-            shadow_bvh = made_up_bvh(np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9)),
-                                     renderer.buffers.work)
+            tri_verts = np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9))
+            shadow_bvh = made_up_bvh(tri_verts, renderer.buffers.work)
+            if cfg.accel != "bvh":       # else the camera half refits its camera rays' BVH
+                SceneBvh(scene.faces.shape[0], [], [], scene.faces).refit_moving(tri_verts, vertices)
         pose = CameraPose(*scene.camera_at(t))
         for _ in range(2):        # the second frame takes the per-frame paths
             render_frame(geom, shading, pose, cfg, renderer.buffers, renderer.scene_grid,

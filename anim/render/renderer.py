@@ -49,14 +49,14 @@ class SceneRenderer:
             return None
         return Shutter(self.scene, t, cfg.shutter / self.scene.spec.frames.fps, cfg.shutter_position)
 
-    def trace_camera_only(self, t):
-        """Interpolate, build the structures (the camera rays' and the shadow
-        rays') and trace the camera rays, and nothing more: what warm_up
-        compiles here while a helper compiles the rest."""
+    def trace_camera_only(self, t, shadow_structure=True):
+        """Interpolate, build the structures (the camera rays' and, with
+        shadow_structure, the shadow rays') and trace the camera rays, and
+        nothing more: what warm_up compiles here while a helper compiles the rest."""
         vertices = self.scene.vertices_at(t)
         geom = Geometry(vertices, self.scene.faces, self.scene.tri_material, self.scene.uvs, *self.vf)
         names = {self.cfg.accel}
-        if self.cfg.shadows and self.shading.lights.shape[0] > 0:
+        if shadow_structure and self.cfg.shadows and self.shading.lights.shape[0] > 0:
             names.add(self.cfg.shadow_accel or SHADOW_ACCEL)
         _, built = build_structures(names, geom, self.cfg, self.scene_grid, self.buffers, {})
         pose = CameraPose(*self.scene.camera_at(t))
@@ -119,7 +119,8 @@ def warm_up(scene, shading, cfg, t):
             # (the write's zip layout is the helper's: it loads after)
             to_half(renderer.buffers.image()[0])
             renderer.trace_camera_only(t)
-            renderer.trace_camera_only(t + dt)
+            # the shadow BVH's refit is the helper's (it evens the halves out)
+            renderer.trace_camera_only(t + dt, shadow_structure=False)
             done = True
         finally:
             helper_compiled = helper.finish(wait=done)
