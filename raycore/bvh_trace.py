@@ -4,9 +4,8 @@ camera tiles of 8x8 pixels), each traced by bvh_packets.walk_packet, or ray
 by ray where a packet has no common shear axis; and the plain-Python
 wrappers the accelerator surface calls (accelerators.BvhAccel)."""
 import numpy as np
-from numba import prange
 
-from ._jit import helper, kernel, parallel_kernel
+from ._jit import helper, kernel
 from .bvh_build import STACK, Bvh
 from .bvh_packets import (DX, DY, DZ, F0, F1, INF, N_ROWS, OX, OY, OZ, PACKET, SHARED_DIRECTION,
                           SHARED_ORIGIN, SINGLE, TMIN, set_inverse, trace_single, walk_packet)
@@ -15,7 +14,7 @@ from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .counters import FALLBACK_RAYS, N_COUNTERS, PACKETS
 from .shadow_rays import directional_light_ray, point_light_ray
 from .thread_pool import on_threads
-from .tile_queue import new_queue, next_tile
+from .tile_queue import next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
            "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "scratch", "trace_batch",
@@ -202,52 +201,51 @@ def trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offse
     return live
 
 
-@parallel_kernel
-def trace_camera_bvh(bvh, cam, width, height, jx, jy, n_workers, out_t, out_prim, out_b1, out_b2, counters):
-    """Closest hits of the camera rays (offset jx, jy) of every pixel, row-major:
-    8x8-pixel packets sharing the eye, pulled from the tile queue."""
+@kernel
+def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters):
+    """Closest hits of the camera rays (offset jx, jy), row-major: the
+    8x8-pixel packets sharing the eye that this thread pulls from `queue`
+    (bvh_trace_camera starts one per thread, thread_pool.on_threads)."""
     side = 8
     tiles_x = (width + side - 1) // side
     n_tiles = tiles_x * ((height + side - 1) // side)
-    queue = new_queue()
-    for _w in prange(n_workers):
-        ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
-        while True:
-            p = next_tile(queue, n_tiles)
-            if p < 0:
-                break
-            x0 = (p % tiles_x) * side
-            y0 = (p // tiles_x) * side
-            n = 0
-            for yy in range(side):
-                for xx in range(side):
-                    x = min(x0 + xx, width - 1)
-                    y = min(y0 + yy, height - 1)
-                    d = primary_dir(cam, x, y, jx, jy)
-                    ray[OX, n], ray[OY, n], ray[OZ, n] = cam[0], cam[1], cam[2]
-                    ray[DX, n], ray[DY, n], ray[DZ, n] = d[0], d[1], d[2]
-                    ray[TMIN, n] = F0
-                    # pixels past the image's edge repeat the last column/row: dead rays
-                    h_t[n] = INF if (x0 + xx < width and y0 + yy < height) else -INF
-                    h_b1[n] = F0
-                    h_b2[n] = F0
-                    prim[n] = -1
-                    n += 1
-            _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
-                          counters, p)
-            n = 0
-            for yy in range(side):
-                for xx in range(side):
-                    x = x0 + xx
-                    y = y0 + yy
-                    if x < width and y < height:
-                        i = y * width + x
-                        k = prim[n]
-                        out_prim[i] = bvh.tri[k] if k >= 0 else -1
-                        out_t[i] = h_t[n] if k >= 0 else INF
-                        out_b1[i] = h_b1[n]
-                        out_b2[i] = h_b2[n]
-                    n += 1
+    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
+    while True:
+        p = next_tile(queue, n_tiles)
+        if p < 0:
+            break
+        x0 = (p % tiles_x) * side
+        y0 = (p // tiles_x) * side
+        n = 0
+        for yy in range(side):
+            for xx in range(side):
+                x = min(x0 + xx, width - 1)
+                y = min(y0 + yy, height - 1)
+                d = primary_dir(cam, x, y, jx, jy)
+                ray[OX, n], ray[OY, n], ray[OZ, n] = cam[0], cam[1], cam[2]
+                ray[DX, n], ray[DY, n], ray[DZ, n] = d[0], d[1], d[2]
+                ray[TMIN, n] = F0
+                # pixels past the image's edge repeat the last column/row: dead rays
+                h_t[n] = INF if (x0 + xx < width and y0 + yy < height) else -INF
+                h_b1[n] = F0
+                h_b2[n] = F0
+                prim[n] = -1
+                n += 1
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
+                      counters, p)
+        n = 0
+        for yy in range(side):
+            for xx in range(side):
+                x = x0 + xx
+                y = y0 + yy
+                if x < width and y < height:
+                    i = y * width + x
+                    k = prim[n]
+                    out_prim[i] = bvh.tri[k] if k >= 0 else -1
+                    out_t[i] = h_t[n] if k >= 0 else INF
+                    out_b1[i] = h_b1[n]
+                    out_b2[i] = h_b2[n]
+                n += 1
 
 
 # --- plain-Python wrappers: validate, allocate, call ------------------------
@@ -325,6 +323,6 @@ def bvh_trace_camera(bvh: Bvh, cam, width, height, jitter=(0.5, 0.5), out=None):
         out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     n_tiles = -(-width // 8) * -(-height // 8)
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
-    trace_camera_bvh(bvh, cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), _workers(),
-                     *out, counters)
+    on_threads(trace_camera_bvh, _workers(), bvh, cam, width, height, np.float32(jitter[0]),
+               np.float32(jitter[1]), _queue(), *out, counters)
     return (*out, counters.sum(axis=0))

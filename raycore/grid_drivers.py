@@ -4,15 +4,14 @@ shadow rays in light-space order) are pulled from the tile queue
 (tile_queue.py) by one worker per thread and traced by trace_or_fallback:
 Coherent Grid Traversal (grid_cgt.walk), or single-ray DDA (grid_dda.py)
 for a packet whose rays share no direction sign on any axis."""
-from numba import prange
 
-from ._jit import helper, kernel, parallel_kernel
+from ._jit import helper, kernel
 from .camera_packets import camera_rays, setup_camera
 from .counters import FALLBACK_RAYS, TESTS, VISITS
 from .grid_cgt import DX, DY, DZ, F1, OX, OY, OZ, TMAX, TMIN, setup_rays, walk
 from .grid_dda import dda_trace
 from .packet_layout import packet_scratch, ray_offsets
-from .tile_queue import new_queue, next_tile, tile_corner, tile_count
+from .tile_queue import next_tile, tile_corner, tile_count
 
 
 @kernel
@@ -125,14 +124,15 @@ def load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max):
             rays[TMAX, j, r] = t_max[i] if s < n_rays else -F1
 
 
-@parallel_kernel
-def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size, n_workers,
+@kernel
+def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size, queue,
                     any_hit, shared_origin, grid, tri_verts, eps,
                     out_t, out_prim, out_b1, out_b2, out_vis, counters, cull):
     """Hits of rays order[0:n_rays], SoA (3, n) origins and directions, in
     packets of packet^2 consecutive entries of `order` (the caller orders
-    them coherently: light-space order for shadow rays), pulled from the
-    tile queue. Ray i's closest (any_hit: any) hit goes to out_*[i]; or,
+    them coherently: light-space order for shadow rays), those this thread
+    pulls from `queue` (trace.py starts one per thread,
+    thread_pool.on_threads). Ray i's closest (any_hit: any) hit goes to out_*[i]; or,
     when out_vis is not empty (shadow rays), only out_vis[i] = 1 for each
     unoccluded ray (the caller zeroes it). shared_origin: rays from one point.
     counters: (n_packets, N_COUNTERS) int64."""
@@ -140,28 +140,26 @@ def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size,
     per_packet = packet * packet // ss * ss
     n_packets = (n_rays + per_packet - 1) // per_packet
     visibility = out_vis.shape[0] > 0
-    queue = new_queue()
-    for _w in prange(n_workers):
-        rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
-            packet_scratch(packet, sub_size)
-        while True:
-            pk = next_tile(queue, n_packets)
-            if pk < 0:
-                break
-            load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max)
-            trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin,
-                              sub, sub_active, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
-                              counters, pk, cull)
-            for j in range(rays.shape[1]):
-                for r in range(ss):
-                    s = pk * per_packet + j * ss + r
-                    if s < n_rays:
-                        i = order[s]
-                        if visibility:
-                            if hit_prim[j, r] < 0:
-                                out_vis[i] = F1
-                        else:
-                            out_t[i] = hit_t[j, r]
-                            out_prim[i] = hit_prim[j, r]
-                            out_b1[i] = hit_b1[j, r]
-                            out_b2[i] = hit_b2[j, r]
+    rays, work, hit_t, hit_b1, hit_b2, hit_prim, sub, sub_active, sub_done, sub_skip, mailbox = \
+        packet_scratch(packet, sub_size)
+    while True:
+        pk = next_tile(queue, n_packets)
+        if pk < 0:
+            break
+        load_packet(rays, pk, order, n_rays, ray_o, ray_d, t_min, t_max)
+        trace_or_fallback(rays, work, hit_t, hit_b1, hit_b2, hit_prim, any_hit, shared_origin,
+                          sub, sub_active, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
+                          counters, pk, cull)
+        for j in range(rays.shape[1]):
+            for r in range(ss):
+                s = pk * per_packet + j * ss + r
+                if s < n_rays:
+                    i = order[s]
+                    if visibility:
+                        if hit_prim[j, r] < 0:
+                            out_vis[i] = F1
+                    else:
+                        out_t[i] = hit_t[j, r]
+                        out_prim[i] = hit_prim[j, r]
+                        out_b1[i] = hit_b1[j, r]
+                        out_b2[i] = hit_b2[j, r]

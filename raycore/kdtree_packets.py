@@ -23,14 +23,14 @@ every ray of the packet with one shear axis for the packet (the Woop test is
 watertight along any axis the directions do not vanish on).
 """
 import numpy as np
-from numba import prange
 
-from ._jit import helper, kernel, parallel_kernel
+from ._jit import helper, kernel
 from .camera import primary_dir_raw
 from .counters import CANDIDATES, FALLBACK_RAYS, N_COUNTERS, PACKETS, TESTS, VISITS
 from .kdtree_build import LEAF, KdTree
 from .kdtree_rays import STACK, trace_one
-from .tile_queue import new_queue, next_tile, tile_corner, tile_count
+from .thread_pool import on_threads
+from .tile_queue import next_tile, tile_corner, tile_count
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
@@ -259,83 +259,82 @@ def _packet(cam, px, py, size, width, height, jx, jy, ep, ep_box, fr,
             r += 1
 
 
-@parallel_kernel
-def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, n_workers, tree, tri_verts,
+@kernel
+def trace_camera_kd(cam, width, height, jx, jy, packet, tile_size, queue, tree, tri_verts,
                     out_t, out_prim, out_b1, out_b2, counters):
-    """Camera rays through the kd-tree: tiles pulled from a shared counter;
+    """Camera rays through the kd-tree: the tiles this thread pulls from
+    `queue` (kd_trace_camera starts one per thread, thread_pool.on_threads);
     per tile an entry point, per packet a frustum walk from it, split where
     the corner-ray conditions fail (down to single rays)."""
     tiles_x, n_tiles = tile_count(width, height, tile_size)
-    queue = new_queue()
-    for _w in prange(n_workers):
-        fr = np.empty((3, 4), np.float32)
-        fr_tile = np.empty((3, 4), np.float32)
-        ep_box = np.empty(6, np.float32)
-        scratch = np.empty((2, 6), np.float32)
-        stack_n = np.empty(STACK, np.int32)
-        stack_box = np.empty((STACK, 6), np.float32)
-        stack_t0 = np.empty(STACK, np.float32)
-        stack_t1 = np.empty(STACK, np.float32)
-        nn = packet * packet
-        ray_d = np.empty((nn, 3), np.float32)
-        ray_s = np.empty((nn, 3), np.float32)
-        t_lo = np.empty(nn, np.float32)
-        best_t = np.empty(nn, np.float32)
-        best_p = np.empty(nn, np.int32)
-        best_b1 = np.empty(nn, np.float32)
-        best_b2 = np.empty(nn, np.float32)
-        mailbox = np.empty(64, np.int32)
-        todo = np.empty((64, 3), np.int64)      # pending (x, y, size) sub-frusta
-        o = (cam[0], cam[1], cam[2])
-        while True:
-            tile = next_tile(queue, n_tiles)
-            if tile < 0:
-                break
-            tx, ty = tile_corner(tile, tiles_x, tile_size)
-            x1 = min(tx + tile_size, width) - 1
-            y1 = min(ty + tile_size, height) - 1
-            ep = 0
-            for q in range(3):
-                ep_box[q] = tree.lo[q]
-                ep_box[3 + q] = tree.hi[q]
-            if frustum_of(cam, tx, ty, x1 + 1, y1 + 1, F0, F0, fr_tile):
-                ep, steps = entry_point(tree, o, fr_tile, ep_box, scratch)
-                counters[tile, VISITS] += steps
-            for py in range(ty, y1 + 1, packet):
-                for px in range(tx, x1 + 1, packet):
-                    todo[0, 0], todo[0, 1], todo[0, 2] = px, py, packet
-                    n_todo = 1
-                    while n_todo > 0:
-                        n_todo -= 1
-                        x, y, size = todo[n_todo, 0], todo[n_todo, 1], todo[n_todo, 2]
-                        if x >= width or y >= height:
-                            continue
-                        ok = frustum_of(cam, x, y, x + size, y + size, F0, F0, fr)
-                        if ok and size > 1:
-                            _packet(cam, x, y, size, width, height, jx, jy, ep, ep_box, fr,
-                                    tree, tri_verts,
-                                    stack_n, stack_box, scratch, ray_d, ray_s, t_lo, best_t, best_p,
-                                    best_b1, best_b2, mailbox, out_t, out_prim, out_b1, out_b2,
-                                    counters, tile)
-                        elif size > 1:                      # adaptive split
-                            h = size // 2
-                            for c in range(4):
-                                todo[n_todo, 0] = x + h * (c & 1)
-                                todo[n_todo, 1] = y + h * (c >> 1)
-                                todo[n_todo, 2] = h
-                                n_todo += 1
-                        else:                               # a single ray
-                            d = primary_dir_raw(cam, x, y, jx, jy)
-                            counters[tile, FALLBACK_RAYS] += 1
-                            t, p, b1, b2 = trace_one(tree, tri_verts, o[0], o[1], o[2], d[0], d[1], d[2],
-                                                     F0, INF, False, stack_n, stack_t0, stack_t1,
-                                                     counters, tile)
-                            norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-                            i = y * width + x
-                            out_t[i] = t * norm if p >= 0 else INF
-                            out_prim[i] = p
-                            out_b1[i] = b1 if p >= 0 else F0
-                            out_b2[i] = b2 if p >= 0 else F0
+    fr = np.empty((3, 4), np.float32)
+    fr_tile = np.empty((3, 4), np.float32)
+    ep_box = np.empty(6, np.float32)
+    scratch = np.empty((2, 6), np.float32)
+    stack_n = np.empty(STACK, np.int32)
+    stack_box = np.empty((STACK, 6), np.float32)
+    stack_t0 = np.empty(STACK, np.float32)
+    stack_t1 = np.empty(STACK, np.float32)
+    nn = packet * packet
+    ray_d = np.empty((nn, 3), np.float32)
+    ray_s = np.empty((nn, 3), np.float32)
+    t_lo = np.empty(nn, np.float32)
+    best_t = np.empty(nn, np.float32)
+    best_p = np.empty(nn, np.int32)
+    best_b1 = np.empty(nn, np.float32)
+    best_b2 = np.empty(nn, np.float32)
+    mailbox = np.empty(64, np.int32)
+    todo = np.empty((64, 3), np.int64)      # pending (x, y, size) sub-frusta
+    o = (cam[0], cam[1], cam[2])
+    while True:
+        tile = next_tile(queue, n_tiles)
+        if tile < 0:
+            break
+        tx, ty = tile_corner(tile, tiles_x, tile_size)
+        x1 = min(tx + tile_size, width) - 1
+        y1 = min(ty + tile_size, height) - 1
+        ep = 0
+        for q in range(3):
+            ep_box[q] = tree.lo[q]
+            ep_box[3 + q] = tree.hi[q]
+        if frustum_of(cam, tx, ty, x1 + 1, y1 + 1, F0, F0, fr_tile):
+            ep, steps = entry_point(tree, o, fr_tile, ep_box, scratch)
+            counters[tile, VISITS] += steps
+        for py in range(ty, y1 + 1, packet):
+            for px in range(tx, x1 + 1, packet):
+                todo[0, 0], todo[0, 1], todo[0, 2] = px, py, packet
+                n_todo = 1
+                while n_todo > 0:
+                    n_todo -= 1
+                    x, y, size = todo[n_todo, 0], todo[n_todo, 1], todo[n_todo, 2]
+                    if x >= width or y >= height:
+                        continue
+                    ok = frustum_of(cam, x, y, x + size, y + size, F0, F0, fr)
+                    if ok and size > 1:
+                        _packet(cam, x, y, size, width, height, jx, jy, ep, ep_box, fr,
+                                tree, tri_verts,
+                                stack_n, stack_box, scratch, ray_d, ray_s, t_lo, best_t, best_p,
+                                best_b1, best_b2, mailbox, out_t, out_prim, out_b1, out_b2,
+                                counters, tile)
+                    elif size > 1:                      # adaptive split
+                        h = size // 2
+                        for c in range(4):
+                            todo[n_todo, 0] = x + h * (c & 1)
+                            todo[n_todo, 1] = y + h * (c >> 1)
+                            todo[n_todo, 2] = h
+                            n_todo += 1
+                    else:                               # a single ray
+                        d = primary_dir_raw(cam, x, y, jx, jy)
+                        counters[tile, FALLBACK_RAYS] += 1
+                        t, p, b1, b2 = trace_one(tree, tri_verts, o[0], o[1], o[2], d[0], d[1], d[2],
+                                                 F0, INF, False, stack_n, stack_t0, stack_t1,
+                                                 counters, tile)
+                        norm = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                        i = y * width + x
+                        out_t[i] = t * norm if p >= 0 else INF
+                        out_prim[i] = p
+                        out_b1[i] = b1 if p >= 0 else F0
+                        out_b2[i] = b2 if p >= 0 else F0
 
 
 def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitter=(0.5, 0.5), tile=32):
@@ -347,6 +346,6 @@ def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitte
     tile = max(tile, packet)
     n_tiles = -(-width // tile) * -(-height // tile)
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
-    trace_camera_kd(cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), packet, tile,
-                    numba.get_num_threads(), tree, tri_verts, *out, counters)
+    on_threads(trace_camera_kd, numba.get_num_threads(), cam, width, height, np.float32(jitter[0]),
+               np.float32(jitter[1]), packet, tile, np.zeros(1, np.int64), tree, tri_verts, *out, counters)
     return (*out, counters.sum(axis=0))

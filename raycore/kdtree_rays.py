@@ -7,13 +7,13 @@ split plane's t is widened by EPS_KD_SPLIT_REL (config.py) so that a ray
 through a split plane never falls between the two children.
 """
 import numpy as np
-from numba import prange
 
-from ._jit import helper, kernel, parallel_kernel
+from ._jit import helper, kernel
 from .config import EPS_KD_SPLIT_REL
 from .counters import CANDIDATES, N_COUNTERS, TESTS, VISITS
 from .kdtree_build import LEAF, KdTree
-from .tile_queue import new_queue, next_tile
+from .thread_pool import on_threads
+from .tile_queue import next_tile
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
@@ -110,32 +110,31 @@ def trace_one(tree, tri_verts,
                 break
 
 
-@parallel_kernel
-def trace_kd_rays(tree, tri_verts, origins, dirs, t_min, t_max, any_hit, chunk, n_workers,
+@kernel
+def trace_kd_rays(tree, tri_verts, origins, dirs, t_min, t_max, any_hit, chunk, queue,
                   out_t, out_prim, out_b1, out_b2, counters):
     """Single-ray traversal of arbitrary rays (the reference), in chunks of
-    `chunk` consecutive rays pulled from the tile queue (a chunk of rays
+    `chunk` consecutive rays this thread pulls from `queue` (one worker per
+    thread, thread_pool.on_threads; a chunk of rays
     that all miss costs little, one in a crowded corner much more: a static
     split would leave a thread idle). counters: one row per chunk."""
     n = origins.shape[0]
     n_chunks = (n + chunk - 1) // chunk
-    queue = new_queue()
-    for _w in prange(n_workers):
-        stack_n = np.empty(STACK, np.int32)
-        stack_t0 = np.empty(STACK, np.float32)
-        stack_t1 = np.empty(STACK, np.float32)
-        while True:
-            c = next_tile(queue, n_chunks)
-            if c < 0:
-                break
-            for i in range(c * chunk, min((c + 1) * chunk, n)):
-                t, p, b1, b2 = trace_one(tree, tri_verts, origins[i, 0], origins[i, 1], origins[i, 2],
-                                         dirs[i, 0], dirs[i, 1], dirs[i, 2], t_min[i], t_max[i],
-                                         any_hit, stack_n, stack_t0, stack_t1, counters, c)
-                out_t[i] = t if p >= 0 else INF
-                out_prim[i] = p
-                out_b1[i] = b1
-                out_b2[i] = b2
+    stack_n = np.empty(STACK, np.int32)
+    stack_t0 = np.empty(STACK, np.float32)
+    stack_t1 = np.empty(STACK, np.float32)
+    while True:
+        c = next_tile(queue, n_chunks)
+        if c < 0:
+            break
+        for i in range(c * chunk, min((c + 1) * chunk, n)):
+            t, p, b1, b2 = trace_one(tree, tri_verts, origins[i, 0], origins[i, 1], origins[i, 2],
+                                     dirs[i, 0], dirs[i, 1], dirs[i, 2], t_min[i], t_max[i],
+                                     any_hit, stack_n, stack_t0, stack_t1, counters, c)
+            out_t[i] = t if p >= 0 else INF
+            out_prim[i] = p
+            out_b1[i] = b1
+            out_b2[i] = b2
 
 
 def kd_trace_rays(tree: KdTree, tri_verts, origins, dirs, t_min=None, t_max=None, any_hit=False):
@@ -148,8 +147,8 @@ def kd_trace_rays(tree: KdTree, tri_verts, origins, dirs, t_min=None, t_max=None
     t_max = np.full(n, np.inf, np.float32) if t_max is None else np.ascontiguousarray(t_max, np.float32)
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     counters = np.zeros((max(1, -(-n // KD_RAY_CHUNK)), N_COUNTERS), np.int64)
-    trace_kd_rays(tree, tri_verts, origins, dirs, t_min, t_max, any_hit, KD_RAY_CHUNK,
-                  numba.get_num_threads(), *out, counters)
+    on_threads(trace_kd_rays, numba.get_num_threads(), tree, tri_verts, origins, dirs, t_min, t_max, any_hit,
+               KD_RAY_CHUNK, np.zeros(1, np.int64), *out, counters)
     return (*out, counters.sum(axis=0))
 
 

@@ -121,9 +121,9 @@ def light_visibility(grid: Grid, tri_verts, rays: LightRays, vis=None, packet=SH
     vis[:] = 0.0
     n_packets = max(1, -(-rays.n_active // (packet * packet)))
     counters = np.zeros((n_packets, N_COUNTERS), np.int64)
-    trace_ray_batch(rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min, rays.t_max,
-                    packet, sub, threads, True, rays.shared_origin, grid, tri_verts, _cull_eps(grid),
-                    *NO_HITS, vis, counters, cull)
+    on_threads(trace_ray_batch, threads, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min,
+               rays.t_max, packet, sub, np.zeros(1, np.int64), True, rays.shared_origin, grid, tri_verts,
+               _cull_eps(grid), *NO_HITS, vis, counters, cull)
     return vis, counters.sum(axis=0)
 
 
@@ -171,7 +171,7 @@ def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, pac
     out_b2 = np.empty(n, np.float32)
     counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
     order = np.arange(n, dtype=np.int32)
-    trace_ray_batch(order, n, np.ascontiguousarray(origins.T), np.ascontiguousarray(dirs.T), t_min, t_max,
-                    packet, sub, threads, any_hit, False, grid, tri_verts, _cull_eps(grid),
-                    out_t, out_prim, out_b1, out_b2, NO_HITS[0], counters, True)
+    on_threads(trace_ray_batch, threads, order, n, np.ascontiguousarray(origins.T), np.ascontiguousarray(dirs.T),
+               t_min, t_max, packet, sub, np.zeros(1, np.int64), any_hit, False, grid, tri_verts, _cull_eps(grid),
+               out_t, out_prim, out_b1, out_b2, NO_HITS[0], counters, True)
     return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))
