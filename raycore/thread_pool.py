@@ -27,13 +27,13 @@ def on_threads(worker, n_workers, *args, per_worker=None):
     queue among args; with per_worker, worker w gets per_worker[w] as its
     last argument. Returns the workers' results, in order.
 
-    This is how the drivers that the demo uses start their workers instead
-    of a numba prange over them: a parallel kernel is optimized by LLVM
-    again as a whole, with every stage it calls, and its parfor costs more
-    compile time than the work it starts (the sweep of shade_blocks.py
-    compiled in 36 s that way, 22 s this way), while the workers run as
-    fast (OpenMP's idle threads wait passively, _jit.py, so that they do
-    not spin on the cores these threads need)."""
+    This is how every driver starts its workers instead of a numba prange
+    over them: a parallel kernel is optimized by LLVM again as a whole,
+    with every stage it calls, and its parfor costs more compile time than
+    the work it starts (the sweep of shade_blocks.py compiled in 36 s that
+    way, 22 s this way), while the workers run 0-4 % slower (README,
+    "Workers on Python threads"; OpenMP's idle threads spin only briefly,
+    _jit.py, so that they do not hold the cores these threads need)."""
     def call(w):
         return worker(*args, per_worker[w]) if per_worker is not None else worker(*args)
 
