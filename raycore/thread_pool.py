@@ -31,9 +31,10 @@ def on_threads(worker, n_workers, *args, per_worker=None):
     over them: a parallel kernel is optimized by LLVM again as a whole,
     with every stage it calls, and its parfor costs more compile time than
     the work it starts (the sweep of shade_blocks.py compiled in 36 s that
-    way, 22 s this way), while the workers run 0-4 % slower (README,
-    "Workers on Python threads"; OpenMP's idle threads spin only briefly,
-    _jit.py, so that they do not hold the cores these threads need)."""
+    way, 22 s this way), while the workers run as fast to within the
+    host's noise (0-8 % slower on some scenes, README, "Workers on Python
+    threads"; OpenMP's idle threads spin only briefly, _jit.py, so that
+    they do not hold the cores these threads need)."""
     def call(w):
         return worker(*args, per_worker[w]) if per_worker is not None else worker(*args)
 
