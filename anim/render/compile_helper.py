@@ -86,6 +86,19 @@ class Helper:
             return {}
 
 
+def refits_the_bvh(cfg, shading) -> bool:
+    """Whether the helper, not the main process, compiles the shadow BVH's
+    refit: when the helper's half is the sweep alone (BVH shadows, camera
+    rays not through a BVH, no AOVs, no error budget, no area light), and
+    the main process's half, the camera rays and the builds, the longer
+    without it (demo: 29-33 s against 22-25). With the phase by phase path's
+    kernels the helper's half is the longer (fairy with every feature on:
+    40 s against 33), and the refit stays with the main process."""
+    from raycore.config import SHADOW_ACCEL
+    return ((cfg.shadow_accel or SHADOW_ACCEL) == "bvh" and cfg.accel != "bvh" and not cfg.aovs
+            and cfg.max_error <= 0 and not bool((shading.lights[:, 7] > 0).any()))
+
+
 def start(scene, cfg, t):
     """A Helper compiling the surface half of (scene, cfg) at time t, or None when not wanted."""
     return Helper(scene, cfg, t) if wanted() else None
@@ -154,7 +167,7 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
         if (cfg.shadow_accel or SHADOW_ACCEL) == "bvh":
             tri_verts = np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9))
             shadow_bvh = made_up_bvh(tri_verts, renderer.buffers.work)
-            if cfg.accel != "bvh":       # else the camera half refits its camera rays' BVH
+            if refits_the_bvh(cfg, shading):
                 SceneBvh(scene.faces.shape[0], [], [], scene.faces).refit_moving(tri_verts, vertices)
         pose = CameraPose(*scene.camera_at(t))
         for _ in range(2):        # the second frame takes the per-frame paths

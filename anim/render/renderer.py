@@ -119,8 +119,8 @@ def warm_up(scene, shading, cfg, t):
             # (the write's zip layout is the helper's: it loads after)
             to_half(renderer.buffers.image()[0])
             renderer.trace_camera_only(t)
-            # the shadow BVH's refit is the helper's (it evens the halves out)
-            renderer.trace_camera_only(t + dt, shadow_structure=False)
+            # the shadow BVH's refit is the helper's where that evens the halves out
+            renderer.trace_camera_only(t + dt, shadow_structure=not compile_helper.refits_the_bvh(small, shading))
             done = True
         finally:
             helper_compiled = helper.finish(wait=done)
