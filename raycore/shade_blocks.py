@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+
 from ._jit import cycle_count, kernel
 from .bvh_build import empty_bvh
 from .bvh_trace import scratch, trace_block_lights

@@ -6,9 +6,10 @@ nothing of each other's results to be compiled: the camera half
 (interpolation, the structures' builds, the camera rays' traversal, and the
 EXR write's half floats, which even the halves out) and the surface half (the
 sweep of shade_blocks.py: the visible-surface gather, the shadow rays and
-their traversal, shading and the image's pixels, and the shadow BVH's
-refit, which evens the halves out). So the main process compiles the camera half while a helper process compiles
-the surface half on camera hits and a shadow BVH made up with the right
+their traversal, shading and the image's pixels, and, where that evens
+the halves out, the shadow BVH's refit: refits_the_bvh). So the main
+process compiles the camera half while a helper process compiles the
+surface half on camera hits and a shadow BVH made up with the right
 types (`MadeUpHits`, `made_up_bvh`: nothing is built there); each writes its
 kernels to numba's on-disk cache, and the main process's full warm-up then
 loads the helper's kernels instead of compiling them.
