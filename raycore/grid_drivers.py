@@ -5,11 +5,14 @@ shadow rays in light-space order) are pulled from the tile queue
 Coherent Grid Traversal (grid_cgt.walk), or single-ray DDA (grid_dda.py)
 for a packet whose rays share no direction sign on any axis."""
 
-from ._jit import helper, kernel
+from numba import prange
+
+from ._jit import helper, kernel, parallel_kernel
 from .camera_packets import camera_rays, setup_camera
 from .counters import FALLBACK_RAYS, TESTS, VISITS
 from .grid_cgt import DX, DY, DZ, F1, OX, OY, OZ, TMAX, TMIN, setup_rays, walk
 from .grid_dda import dda_trace
+from .launch import call_native
 from .packet_layout import packet_scratch, ray_offsets
 from .tile_queue import next_tile, tile_corner, tile_count
 
@@ -100,6 +103,16 @@ def trace_primary(queue, cam, width, height, jx, jy, packet, sub_size, tile_size
                     walk(work, hit_t, hit_b1, hit_b2, hit_prim, False, True, K, s,
                          k_ref, w_end, sub, sub_done, sub_skip, mailbox, grid, tri_verts, eps,
                          counters, tile, cull)
+
+
+@parallel_kernel
+def trace_primary_on_threads(entry, n_workers, queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
+                             grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
+    """trace_primary on n_workers of numba's threads, called through its
+    native entry point (launch.py: nothing linked in, nothing optimised twice)."""
+    for _w in prange(n_workers):
+        call_native(entry, (queue, cam, width, height, jx, jy, packet, sub_size, tile_size, grid, tri_verts, eps,
+                            sw_t, sw_prim, sw_b1, sw_b2, counters, cull))
 
 
 @helper

@@ -23,15 +23,16 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from numba import prange
 
-from ._jit import cycle_count, kernel
+from ._jit import cycle_count, kernel, parallel_kernel
 from .bvh_build import empty_bvh
 from .bvh_trace import scratch, trace_block_lights
 from .config import EPS_OFFSET_ULPS
 from .counters import N_COUNTERS
+from .launch import call_native, native_entry
 from .shade import shade_rows, write_block
 from .surface import GATHER_BLOCK, fill_block
-from .thread_pool import on_threads
 from .tile_queue import next_tile, tile_corner, tile_count
 
 F32 = np.float32
@@ -101,6 +102,21 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
     stats[TOTAL] += cycle_count() - start
 
 
+@parallel_kernel
+def shade_blocks_on_threads(entry, cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces,
+                            normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights,
+                            rows, offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters,
+                            stats):
+    """shade_blocks on each of numba's threads (a row of stats each), called
+    through its native entry point (launch.py: nothing linked in, nothing
+    optimised twice)."""
+    for w in prange(stats.shape[0]):
+        call_native(entry, (cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces,
+                            normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights,
+                            rows, offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters,
+                            stats[w]))
+
+
 class Sweep(NamedTuple):
     """What one shade_image call did."""
     samples: int              # visible samples (camera rays that hit)
@@ -122,11 +138,11 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
     n_workers = numba.get_num_threads()
     stats = np.zeros((n_workers, 4), np.int64)
     queue = np.zeros(1, np.int64)           # tile_queue's counter
-    on_threads(shade_blocks, n_workers, cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1,
-               hits.b2, row_off, col_off, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
-               tex_info, bvh if shadows else NO_BVH, lights, np.ascontiguousarray(lights[rows, :4]), rows,
-               F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg, F32(weight), accumulate, queue, rgba, z,
-               counters, per_worker=stats)
+    args = (cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off, tri_verts,
+            faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh if shadows else NO_BVH, lights,
+            np.ascontiguousarray(lights[rows, :4]), rows, F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg,
+            F32(weight), accumulate, queue, rgba, z, counters)
+    shade_blocks_on_threads(native_entry(shade_blocks, *args, stats[0]), *args, stats)
     total = stats[:, TOTAL].sum()
     return Sweep(int(stats[:, SAMPLES].sum()), int(stats[:, LIVE].sum()), counters.sum(axis=0),
                  float(stats[:, SHADOW].sum() / total) if total > 0 else 0.0)

@@ -1,0 +1,41 @@
+"""launch.py: a parallel loop calling a worker kernel through its native
+entry point, as the camera rays and the sweep are started."""
+import numpy as np
+import pytest
+from numba import njit, prange
+
+from raycore.launch import call_native, native_entry
+
+
+@njit(nogil=True)
+def _fill_row(row, start, step):
+    for i in range(row.shape[0]):
+        row[i] = start + step * i
+
+
+@njit(parallel=True)
+def _fill_rows_on_threads(entry, rows, start, step):
+    for w in prange(rows.shape[0]):
+        call_native(entry, (rows[w], start + w, step))
+
+
+def test_every_row_is_filled_by_the_worker_called_through_its_address():
+    rows = np.zeros((5, 7), np.float64)
+    entry = native_entry(_fill_row, rows[0], 0.0, 0.5)
+    _fill_rows_on_threads(entry, rows, 0.0, 0.5)
+    np.testing.assert_array_equal(rows, np.arange(5)[:, None] + 0.5 * np.arange(7)[None, :])
+
+
+def test_the_entry_is_that_of_the_arguments_types():
+    a, b = np.zeros(3, np.float64), np.zeros(3, np.float32)
+    assert native_entry(_fill_row, a, 0.0, 1.0) == native_entry(_fill_row, a, 2.0, 3.0)
+    assert native_entry(_fill_row, a, 0.0, 1.0) != native_entry(_fill_row, b, np.float32(0), np.float32(1))
+
+
+def test_a_worker_that_returns_a_value_is_refused():
+    @njit
+    def worker(x):
+        return x + 1
+
+    with pytest.raises(TypeError, match="returns nothing"):
+        native_entry(worker, 1)
