@@ -106,13 +106,14 @@ def trace_primary(queue, cam, width, height, jx, jy, packet, sub_size, tile_size
 
 
 @parallel_kernel
-def trace_primary_on_threads(entry, n_workers, queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
+def trace_primary_on_threads(entry, ok, queue, cam, width, height, jx, jy, packet, sub_size, tile_size,
                              grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
-    """trace_primary on n_workers of numba's threads, called through its
-    native entry point (launch.py: nothing linked in, nothing optimised twice)."""
-    for _w in prange(n_workers):
-        call_native(entry, (queue, cam, width, height, jx, jy, packet, sub_size, tile_size, grid, tri_verts, eps,
-                            sw_t, sw_prim, sw_b1, sw_b2, counters, cull))
+    """trace_primary on each of numba's threads (ok: a flag each, False if
+    it failed), called through its native entry point (launch.py: nothing
+    linked in, nothing optimised twice)."""
+    for w in prange(ok.shape[0]):
+        ok[w] = call_native(entry, (queue, cam, width, height, jx, jy, packet, sub_size, tile_size, grid,
+                                    tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull))
 
 
 @helper

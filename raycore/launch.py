@@ -16,7 +16,10 @@ is linked in, and the loop compiles in about a second.
 The call uses numba's own calling convention (status, exception slot, the
 arguments flattened as numba passes them); the address comes from the
 worker's overload for exactly the argument types the loop is called with,
-so the two cannot disagree. Workers started this way return nothing.
+so the two cannot disagree. Workers started this way return nothing; one
+that raises (numba's MemoryError) cannot pass its exception through the
+parallel loop, so each thread's call reports success in a flag and the
+caller raises (check_workers) instead of writing a frame with holes.
 """
 import numba
 from numba.core import types
@@ -26,7 +29,9 @@ from numba.extending import intrinsic
 @intrinsic
 def call_native(typingctx, entry, args):
     """worker(*args) for the worker kernel whose native entry point is
-    `entry` (native_entry: compiled for exactly args' types)."""
+    `entry` (native_entry: compiled for exactly args' types). Returns False
+    when the worker raised (its exception cannot cross the parallel loop:
+    the caller raises instead, check_workers)."""
     arg_types = tuple(args.types)
 
     def codegen(context, builder, signature, llargs):
@@ -34,10 +39,17 @@ def call_native(typingctx, entry, args):
         values = [builder.extract_value(packed, i) for i in range(len(arg_types))]
         fnty = context.call_conv.get_function_type(types.none, arg_types)
         fn = builder.inttoptr(address, fnty.as_pointer())
-        context.call_conv.call_function(builder, fn, types.none, arg_types, values)
-        return context.get_dummy_value()
+        status, _ = context.call_conv.call_function(builder, fn, types.none, arg_types, values)
+        return builder.not_(status.is_error)
 
-    return types.none(entry, args), codegen
+    return types.boolean(entry, args), codegen
+
+
+def check_workers(worker, ok):
+    """Raise if a worker started through call_native failed (ok: one flag a worker)."""
+    if not ok.all():
+        raise RuntimeError(f"{worker.py_func.__name__} failed on {int((~ok).sum())} of {ok.shape[0]} threads "
+                           "(out of memory?); the frame is not written")
 
 
 _ENTRIES = {}          # (worker, argument types) -> address

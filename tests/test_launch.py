@@ -4,26 +4,39 @@ import numpy as np
 import pytest
 from numba import njit, prange
 
-from raycore.launch import call_native, native_entry
+from raycore.launch import call_native, check_workers, native_entry
 
 
 @njit(nogil=True)
 def _fill_row(row, start, step):
+    if step < 0:
+        raise ValueError("negative step")
     for i in range(row.shape[0]):
         row[i] = start + step * i
 
 
 @njit(parallel=True)
-def _fill_rows_on_threads(entry, rows, start, step):
+def _fill_rows_on_threads(entry, ok, rows, start, step):
     for w in prange(rows.shape[0]):
-        call_native(entry, (rows[w], start + w, step))
+        ok[w] = call_native(entry, (rows[w], start + w, step))
 
 
 def test_every_row_is_filled_by_the_worker_called_through_its_address():
     rows = np.zeros((5, 7), np.float64)
-    entry = native_entry(_fill_row, rows[0], 0.0, 0.5)
-    _fill_rows_on_threads(entry, rows, 0.0, 0.5)
+    ok = np.zeros(5, np.bool_)
+    _fill_rows_on_threads(native_entry(_fill_row, rows[0], 0.0, 0.5), ok, rows, 0.0, 0.5)
     np.testing.assert_array_equal(rows, np.arange(5)[:, None] + 0.5 * np.arange(7)[None, :])
+    assert ok.all()
+    check_workers(_fill_row, ok)
+
+
+def test_a_worker_that_raises_is_reported_not_lost():
+    rows = np.zeros((3, 4), np.float64)
+    ok = np.ones(3, np.bool_)
+    _fill_rows_on_threads(native_entry(_fill_row, rows[0], 0.0, -1.0), ok, rows, 0.0, -1.0)
+    assert not ok.any()
+    with pytest.raises(RuntimeError, match="_fill_row failed on 3 of 3 threads"):
+        check_workers(_fill_row, ok)
 
 
 def test_the_entry_is_that_of_the_arguments_types():
