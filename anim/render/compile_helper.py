@@ -89,15 +89,17 @@ class Helper:
 
 def refits_the_bvh(cfg, shading) -> bool:
     """Whether the helper, not the main process, compiles the shadow BVH's
-    refit: when the helper's half is the sweep alone (BVH shadows, camera
+    refit: when the frames refit one for their shadow rays and the
+    helper's half is the sweep alone (BVH shadows, camera
     rays not through a BVH, no AOVs, no error budget, no area light), and
     the main process's half, the camera rays and the builds, the longer
     without it (demo: 29-33 s against 22-25). With the phase by phase path's
     kernels the helper's half is the longer (fairy with every feature on:
     40 s against 33), and the refit stays with the main process."""
     from raycore.config import SHADOW_ACCEL
-    return ((cfg.shadow_accel or SHADOW_ACCEL) == "bvh" and cfg.accel != "bvh" and not cfg.aovs
-            and cfg.max_error <= 0 and not bool((shading.lights[:, 7] > 0).any()))
+    return (cfg.shadows and shading.lights.shape[0] > 0 and (cfg.shadow_accel or SHADOW_ACCEL) == "bvh"
+            and cfg.accel != "bvh" and not cfg.aovs and cfg.max_error <= 0
+            and not bool((shading.lights[:, 7] > 0).any()))
 
 
 def start(scene, cfg, t):
