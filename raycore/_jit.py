@@ -29,9 +29,9 @@ from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
 # OpenMP measured faster than the default workqueue on this machine kind.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 # OpenMP's threads (libgomp's) spin for at most ~0.2 ms when a parallel loop
-# ends, not for up to milliseconds (its default, 300,000 turns): the drivers'
-# workers are Python threads (thread_pool.on_threads), and so are the EXR
-# encoder's, and a spinning OpenMP thread takes the core they need. 10,000
+# ends, not for up to milliseconds (its default, 300,000 turns): most
+# drivers' workers are Python threads (thread_pool.on_threads), and so are
+# the EXR encoder's, and a spinning OpenMP thread takes the core they need. 10,000
 # turns keep the build's back-to-back loops as fast as the default spin
 # (sleeping at once cost the grid and BVH update 0.3-0.6 ms a frame). Read
 # when numba first starts its threads, so set here, before any kernel

@@ -4,7 +4,6 @@ shadow rays in light-space order) are pulled from the tile queue
 (tile_queue.py) by one worker per thread and traced by trace_or_fallback:
 Coherent Grid Traversal (grid_cgt.walk), or single-ray DDA (grid_dda.py)
 for a packet whose rays share no direction sign on any axis."""
-
 from numba import prange
 
 from ._jit import helper, kernel, parallel_kernel
@@ -64,7 +63,7 @@ def trace_primary(queue, cam, width, height, jx, jy, packet, sub_size, tile_size
                   grid, tri_verts, eps, sw_t, sw_prim, sw_b1, sw_b2, counters, cull):
     """Closest hits of the camera rays (sub-pixel offset jx, jy) of the
     tiles this thread pulls from `queue` until none is left (trace.py starts
-    one per thread, thread_pool.on_threads).
+    one per thread: trace_primary_on_threads, launch.py).
 
     grid: grid_build.Grid over tri_verts. sw_*: packet-major hits
     (n_packets, n_sub, S*S), packet (px, py) at index
@@ -146,9 +145,9 @@ def trace_ray_batch(order, n_rays, ray_o, ray_d, t_min, t_max, packet, sub_size,
     packets of packet^2 consecutive entries of `order` (the caller orders
     them coherently: light-space order for shadow rays), those this thread
     pulls from `queue` (trace.py starts one per thread,
-    thread_pool.on_threads). Ray i's closest (any_hit: any) hit goes to out_*[i]; or,
-    when out_vis is not empty (shadow rays), only out_vis[i] = 1 for each
-    unoccluded ray (the caller zeroes it). shared_origin: rays from one point.
+    thread_pool.on_threads). Ray i's closest (any_hit: any) hit goes to
+    out_*[i]; or, when out_vis is not empty (shadow rays), only out_vis[i] =
+    1 for each unoccluded ray (the caller zeroes it). shared_origin: rays from one point.
     counters: (n_packets, N_COUNTERS) int64."""
     ss = sub_size * sub_size
     per_packet = packet * packet // ss * ss

@@ -22,6 +22,7 @@ parallel loop, so each thread's call reports success in a flag and the
 caller raises (check_workers) instead of writing a frame with holes.
 """
 import numba
+import numpy as np
 from numba.core import types
 from numba.extending import intrinsic
 
@@ -43,6 +44,19 @@ def call_native(typingctx, entry, args):
         return builder.not_(status.is_error)
 
     return types.boolean(entry, args), codegen
+
+
+def on_omp_threads(loop, worker, n_workers, *args, per_worker=None):
+    """worker(*args) on n_workers of numba's threads: `loop` is the
+    worker's parallel loop, loop(entry, ok, *args[, per_worker]), which
+    calls it through call_native on each thread (with per_worker[w] as the
+    last argument when given); raises if a worker failed."""
+    ok = np.zeros(n_workers, np.bool_)
+    if per_worker is None:
+        loop(native_entry(worker, *args), ok, *args)
+    else:
+        loop(native_entry(worker, *args, per_worker[0]), ok, *args, per_worker)
+    check_workers(worker, ok)
 
 
 def check_workers(worker, ok):

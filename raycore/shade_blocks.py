@@ -30,7 +30,7 @@ from .bvh_build import empty_bvh
 from .bvh_trace import scratch, trace_block_lights
 from .config import EPS_OFFSET_ULPS
 from .counters import N_COUNTERS
-from .launch import call_native, check_workers, native_entry
+from .launch import call_native, on_omp_threads
 from .shade import shade_rows, write_block
 from .surface import GATHER_BLOCK, fill_block
 from .tile_queue import next_tile, tile_corner, tile_count
@@ -46,7 +46,7 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
                  tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
                  offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats):
     """One thread's share of a camera pass's pixels (shade_image starts one
-    per thread): GATHER_BLOCK^2-pixel blocks pulled from `queue` until none
+    per thread, shade_blocks_on_threads): GATHER_BLOCK^2-pixel blocks pulled from `queue` until none
     are left, each gathered (hits of pixel (x, y) at row_off[y] +
     col_off[x]), shadowed (when shadows: lights shadow_lights (m, 4) into
     vis rows `rows`, as bvh_trace.trace_light_samples), shaded with every
@@ -104,9 +104,9 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
 
 @parallel_kernel
 def shade_blocks_on_threads(entry, ok, cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts,
-                            faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights,
-                            rows, offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters,
-                            stats):
+                            faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights,
+                            shadow_lights, rows, offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba,
+                            z, counters, stats):
     """shade_blocks on each of numba's threads (a row of stats each), called
     through its native entry point (launch.py: nothing linked in, nothing
     optimised twice). ok: a flag a thread, False if its worker failed."""
@@ -142,9 +142,7 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
             faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh if shadows else NO_BVH, lights,
             np.ascontiguousarray(lights[rows, :4]), rows, F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg,
             F32(weight), accumulate, queue, rgba, z, counters)
-    ok = np.zeros(n_workers, np.bool_)
-    shade_blocks_on_threads(native_entry(shade_blocks, *args, stats[0]), ok, *args, stats)
-    check_workers(shade_blocks, ok)
+    on_omp_threads(shade_blocks_on_threads, shade_blocks, n_workers, *args, per_worker=stats)
     total = stats[:, TOTAL].sum()
     return Sweep(int(stats[:, SAMPLES].sum()), int(stats[:, LIVE].sum()), counters.sum(axis=0),
                  float(stats[:, SHADOW].sum() / total) if total > 0 else 0.0)

@@ -29,8 +29,9 @@ def on_threads(worker, n_workers, *args, per_worker=None):
 
     This is how the drivers start their workers instead of a numba prange
     over them (the camera rays and the sweep, which every frame takes, use
-    launch.py instead: OpenMP's threads without the prange's compile): a parallel kernel is optimized by LLVM again as a whole,
-    with every stage it calls, and its parfor costs more compile time than
+    launch.py instead: OpenMP's threads without the prange's compile): a
+    parallel kernel is optimized by LLVM again as a whole, with every stage
+    it calls, and its parfor costs more compile time than
     the work it starts (the sweep of shade_blocks.py compiled in 36 s that
     way, 22 s this way), while the workers run as fast to within the
     host's noise (0-8 % slower on some scenes, README, "Workers on Python

@@ -1,12 +1,12 @@
 """Tiles handed to the cores with dynamic load balancing.
 
-One worker per thread (launch.py or thread_pool.on_threads starts them); each allocates
-its scratch once and then pulls work items (camera tiles, ray packets,
-chunks of single rays) from one queue, a shared atomic counter (new_queue,
-next_tile), until none are left, so a thread that drew cheap items (sky)
-takes more of them. Every traversal, grid, kd-tree and BVH, pulls its work
-this way. Tiles are square, a
-multiple of the packet size, and many more than the threads.
+One worker per thread (launch.py or thread_pool.on_threads starts them);
+each allocates its scratch once and then pulls work items (camera tiles,
+ray packets, chunks of single rays) from one queue, a shared atomic counter
+(new_queue, next_tile), until none are left, so a thread that drew cheap
+items (sky) takes more of them. Every traversal, grid, kd-tree and BVH,
+pulls its work this way. Tiles are square, a multiple of the packet size,
+and many more than the threads.
 """
 import numpy as np
 

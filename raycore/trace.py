@@ -8,7 +8,7 @@ from .config import EPS_CULL_REL, PACKET_SIZES
 from .grid_build import Grid
 from .counters import N_COUNTERS
 from .grid_drivers import trace_primary, trace_primary_on_threads, trace_ray_batch
-from .launch import check_workers, native_entry
+from .launch import on_omp_threads
 from .packet_layout import swizzle_offsets, unswizzle
 from .shadow_rays import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
@@ -97,9 +97,7 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     args = (np.zeros(1, np.int64), cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), packet, sub,
             tile, grid, tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
-    ok = np.zeros(threads, np.bool_)
-    trace_primary_on_threads(native_entry(trace_primary, *args), ok, *args)
-    check_workers(trace_primary, ok)
+    on_omp_threads(trace_primary_on_threads, trace_primary, threads, *args)
     flat = (sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1))
     if not row_major:
         return Hits(*flat, counters.sum(axis=0))
