@@ -239,6 +239,17 @@ class Curve:
         horner_into(c[0], c[1], c[2], c[3], s, out.reshape(-1))
 
 
+def relative_angles(q0, q):
+    """Angle (radians) of the rotation from unit quaternion q0 to each of q
+    (n, 4), all (w, x, y, z): 2 atan2(|v|, |w|) of q0^-1 q, as scipy's
+    (r0.inv() * r).magnitude(), without importing scipy.spatial."""
+    w0, v0 = q0[0], -np.asarray(q0[1:])
+    w, v = q[:, 0], q[:, 1:]
+    rw = w0 * w - v @ v0
+    rv = w0 * v + w[:, None] * v0 + np.cross(v0, v)
+    return 2.0 * np.arctan2(np.linalg.norm(rv, axis=1), np.abs(rw))
+
+
 def normalized_quaternions(q):
     """(q / |q|, list of the key indices whose |q| was not 1 to 1e-6)."""
     q = np.asarray(q, np.float64)
@@ -252,39 +263,47 @@ def normalized_quaternions(q):
 class RotationCurve:
     """Unit quaternion keys (w, x, y, z). `slerp` along the shortest arc (q and
     -q are the same rotation), or `spline`: scipy's RotationSpline, C2 in the
-    rotation vector. Breaks (see module doc) are slerped."""
+    rotation vector. Breaks (see module doc) are slerped.
+
+    scipy's rotations are made on the first evaluation here, not at load:
+    importing scipy.spatial costs ~0.25 s of every start, and a scene's
+    slerped tracks are evaluated by numba kernels (anim/track_kernels.py,
+    anim/rigid_batch.py), which need only the keys."""
 
     def __init__(self, times, quats_wxyz, method="slerp", extrapolate="clamp"):
-        # imported here, by the scenes with rotation tracks: scipy.spatial
-        # costs ~0.3 s of every start otherwise
-        from scipy.spatial.transform import Rotation, RotationSpline, Slerp
         q = np.asarray(quats_wxyz, np.float64)
         self.quats = q
         self.times = np.asarray(times, np.float64)
         self.extrapolate = extrapolate
         self.method = "spline" if method == "spline" else "slerp"
-        self.rotations = Rotation.from_quat(q[:, [1, 2, 3, 0]])   # scipy: scalar last
-        rel = (self.rotations[0].inv() * self.rotations).magnitude()
-        self.constant = len(self.times) == 1 or bool(np.all(rel < 1e-15))
-        self._piece_of_segment = []
-        if len(self.times) == 1:
-            return
-        if method not in ("linear", "slerp", "spline"):
+        self.constant = len(self.times) == 1 or bool(np.all(relative_angles(q[0], q) < 1e-15))
+        if len(self.times) > 1 and method not in ("linear", "slerp", "spline"):
             raise ValueError(f"unknown rotation interpolation {method!r}")
-        for a, b in pieces(self.times):
-            span = slice(a, b + 1)
-            if method == "spline" and b - a > 1:
-                fit = RotationSpline(self.times[span], self.rotations[span])
-            else:
-                fit = Slerp(self.times[span], self.rotations[span])
-            self._piece_of_segment += [fit] * (b - a)
+        self._fits = None
+
+    def _pieces(self):
+        """scipy's interpolant of each segment (made once, when first asked)."""
+        if self._fits is None:
+            from scipy.spatial.transform import Rotation, RotationSpline, Slerp
+            self.rotations = Rotation.from_quat(self.quats[:, [1, 2, 3, 0]])   # scipy: scalar last
+            self._fits = []
+            if len(self.times) > 1:
+                for a, b in pieces(self.times):
+                    span = slice(a, b + 1)
+                    if self.method == "spline" and b - a > 1:
+                        fit = RotationSpline(self.times[span], self.rotations[span])
+                    else:
+                        fit = Slerp(self.times[span], self.rotations[span])
+                    self._fits += [fit] * (b - a)
+        return self._fits
 
     def rotation(self, t):
         """scipy Rotation at time t."""
-        if not self._piece_of_segment:
+        fits = self._pieces()
+        if not fits:
             return self.rotations[0]
         t, k = locate(self.times, t, self.extrapolate)
-        return self._piece_of_segment[k]([t])[0]
+        return fits[k]([t])[0]
 
     def __call__(self, t):
         return self.rotation(t).as_matrix()

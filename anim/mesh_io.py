@@ -4,10 +4,12 @@ STL is the exception: it stores every triangle's three corners apart, so
 nothing is shared and vertex normals would be the facets' own (a faceted
 look). Its exactly coincident corners are merged, in order of first
 appearance, so that keyframes of one STL animation stay in correspondence.
+trimesh is imported only to parse a file that mesh_cache.py has not kept
+(importing it, with scipy.spatial, costs ~0.45 s).
 """
 import numpy as np
-import trimesh
 
+from . import mesh_cache
 from .errors import SceneError
 
 
@@ -17,6 +19,24 @@ def load_mesh(path, scene_file, key):
     process=False keeps vertex order and count exactly as in the file, so the
     keyframes of one object stay in correspondence.
     """
+    try:
+        data = open(path, "rb").read()
+    except FileNotFoundError:
+        raise SceneError(scene_file, key, f"mesh file not found: {path}") from None
+    except OSError as exc:
+        raise SceneError(scene_file, key, f"cannot read mesh {path}: {exc}") from None
+    cache_key = mesh_cache.key_of(path, data)
+    cached = mesh_cache.load(cache_key)
+    if cached is not None:
+        return cached
+    vertices, faces, uvs = _parse(path, scene_file, key)
+    mesh_cache.store(cache_key, vertices, faces, uvs)
+    return vertices, faces, uvs
+
+
+def _parse(path, scene_file, key):
+    """load_mesh's result, parsed by trimesh and checked."""
+    import trimesh
     try:
         loaded = trimesh.load(str(path), process=False, force="mesh")
     except FileNotFoundError:
@@ -52,12 +72,11 @@ def merge_coincident(vertices, faces):
 def vertex_lines(path) -> int:
     """How many vertices an OBJ file writes ('v ' lines), counted as
     written: the loader drops vertices no face uses, which would hide an
-    extra or missing line that shifts every index after it."""
-    n = 0
+    extra or missing line that shifts every index after it. -1 if the file
+    cannot be read."""
     try:
-        with open(path, "rb") as f:
-            for line in f:
-                n += line[:2] in (b"v ", b"v\t")
+        data = open(path, "rb").read()
     except OSError:
         return -1
-    return n
+    return (data.count(b"\nv ") + data.count(b"\nv\t")
+            + (data[:2] in (b"v ", b"v\t")))

@@ -13,6 +13,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+# parsed meshes (anim/mesh_cache.py) kept with the suite's other caches, not
+# in the user's ~/.cache; subprocesses inherit it
+os.environ.setdefault("FRUSTRACE_CACHE_DIR", str(ROOT / ".pytest_cache" / "frustrace"))
 
 
 @pytest.fixture

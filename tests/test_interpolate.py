@@ -156,3 +156,22 @@ def test_the_one_slerp_matches_scipy_on_random_and_antipodal_pairs():
                                        ref(u).as_matrix(), atol=1e-9)
     slerp_into(q[0], q[0] * (1 + 1e-13), 0.5, out)                            # nearly equal keys
     np.testing.assert_allclose(out, q[0], atol=1e-12)
+
+
+def test_relative_angles_match_scipy_and_constant_tracks_are_found_without_it():
+    """RotationCurve decides 'constant' with numpy (scipy.spatial is imported
+    only when a Python evaluation needs it): the angles are scipy's
+    (r0.inv() * r).magnitude(), for random, antipodal and equal keys."""
+    from scipy.spatial.transform import Rotation
+    from anim.interpolate import relative_angles
+    q = Rotation.random(64, random_state=7).as_quat()[:, [3, 0, 1, 2]]
+    q[5] = -q[0]                                       # the same rotation as key 0
+    q[6] = q[0]
+    ref = (Rotation.from_quat(q[[0]][:, [1, 2, 3, 0]]).inv() * Rotation.from_quat(q[:, [1, 2, 3, 0]])).magnitude()
+    np.testing.assert_allclose(relative_angles(q[0], q), ref, atol=1e-12)
+    assert relative_angles(q[0], q)[[0, 5, 6]].max() == 0.0
+    assert RotationCurve([0, 1, 2], [q[0], -q[0], q[0]]).constant
+    assert not RotationCurve([0, 1], [q[0], q[1]]).constant
+    assert RotationCurve([0], [q[3]]).constant
+    with pytest.raises(ValueError, match="unknown rotation interpolation"):
+        RotationCurve([0, 1], [q[0], q[1]], "cubic")
