@@ -189,6 +189,10 @@ def _main():
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # the main process ends it
     scene_path, camera, cfg, t = pickle.loads(sys.stdin.buffer.read())
     sys.stdout.buffer.write(pickle.dumps(compile_surface_half(scene_path, camera, cfg, t)))
+    sys.stdout.flush()
+    # the render waits for this process to end: skip the interpreter's
+    # teardown (its garbage collection, 0.3-0.4 s; see cli.main.entry)
+    os._exit(0)
 
 
 if __name__ == "__main__":
