@@ -62,3 +62,18 @@ def pytest_sessionstart(session):
     subprocess.run([sys.executable, "-m", "cli.main", "render", str(ROOT / "anim/builtin/demo/anim.yaml"),
                     "-o", str(COLD_START), "--frames", "0:1", "--res", "64x64", "-q"], cwd=ROOT, check=False,
                    capture_output=True)
+
+
+# the longest test files, longest first (pytest --durations, 2026-12-03: faults
+# 74 s, cluster 66, exr_and_cli 18, builtin_scenes 18, grid_cgt 11,
+# input_checks 11, wheel 9): `make test` hands a whole file to a worker at a
+# time (--dist loadfile), in collection order, so the long ones go first and
+# the short ones fill in behind them, instead of one long file starting last
+# while the other worker runs out of work
+LONGEST_FILES = ("test_faults.py", "test_cluster.py", "test_exr_and_cli.py", "test_builtin_scenes.py",
+                 "test_grid_cgt.py", "test_input_checks.py", "test_wheel.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(LONGEST_FILES)))   # stable: files keep their order
