@@ -31,8 +31,10 @@ from typing import NamedTuple
 import numpy as np
 
 from numba import prange
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from ._jit import helper, kernel, parallel_kernel
+from .row8 import min_rows, swap_rows
 from .thread_pool import thread_pool
 
 N_BINS = 16
@@ -113,11 +115,19 @@ def _area(x0, y0, z0, x1, y1, z1):
     return dx * dy + dy * dz + dz * dx
 
 
+# --- the build's data, 8 floats a row, so that a primitive's box is one
+# vector: a primitive (m, 8): lo x, y, z, its number (int32 bits), -hi x, y, z, 0,
+# and its centroid (m, 8): c x, y, z, 0, -c x, y, z, 0; a bin's box (8) and
+# a span (16: box, then centroid bounds) alike. Every bound is then a
+# minimum (of -hi where it is a maximum), taken 8 lanes at a time.
+ROW = 8
+
+
 @helper
-def _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1):
-    """The box (x0..z1) grown by bin b of axis a (the SAH sweeps)."""
-    return (min(x0, bin_box[a, b, 0]), min(y0, bin_box[a, b, 1]), min(z0, bin_box[a, b, 2]),
-            max(x1, bin_box[a, b, 3]), max(y1, bin_box[a, b, 4]), max(z1, bin_box[a, b, 5]))
+def _grow(bins, r, x0, y0, z0, x1, y1, z1):
+    """The box (x0..z1; x1..z1 as -hi) grown by bin row r."""
+    return (min(x0, bins[r, 0]), min(y0, bins[r, 1]), min(z0, bins[r, 2]),
+            min(x1, bins[r, 4]), min(y1, bins[r, 5]), min(z1, bins[r, 6]))
 
 
 # the largest bin scale: N_BINS / extent overflows float32 for extents
@@ -139,41 +149,22 @@ def _bin_scale(ext):
 
 
 @helper
-def _span(bounds, centroids, s, e, out, row):
-    """out[row] = the box (6) and the centroids' bounds (6) of primitives s..e-1
+def _empty(rows, i, n):
+    """rows[i, :n] = inf: the start of a minimum."""
+    for q in range(n):
+        rows[i, q] = INF
+
+
+@helper
+def _span(prims, cents, s, e, out, row):
+    """out[row] (16) = the box and the centroids' bounds of primitives s..e-1
     (the root's, and the children of a split by count)."""
-    _empty_span(out, row)
+    box = out[row:row + 1, 0:ROW]
+    cen = out[row:row + 1, ROW:2 * ROW]
+    _empty(out, row, 2 * ROW)
     for k in range(s, e):
-        _add_to_span(bounds, centroids, k, out, row)
-
-
-@helper
-def _add_to_span(bounds, centroids, k, out, row):
-    """Primitive k's box and centroid added to out[row] (as _span)."""
-    for q in range(3):
-        out[row, q] = min(out[row, q], bounds[k, q])
-        out[row, 3 + q] = max(out[row, 3 + q], bounds[k, 3 + q])
-        out[row, 6 + q] = min(out[row, 6 + q], centroids[k, q])
-        out[row, 9 + q] = max(out[row, 9 + q], centroids[k, q])
-
-
-@helper
-def _clear_bins(bin_n, bin_box):
-    """Every bin that holds primitives emptied (count 0, empty box)."""
-    for a in range(3):
-        for b in range(N_BINS):
-            if bin_n[a, b] != 0:
-                bin_n[a, b] = 0
-                bin_box[a, b, 0] = bin_box[a, b, 1] = bin_box[a, b, 2] = np.float32(np.inf)
-                bin_box[a, b, 3] = bin_box[a, b, 4] = bin_box[a, b, 5] = np.float32(-np.inf)
-
-
-@helper
-def _empty_span(out, row):
-    """out[row] = the span of no primitive (the start of _add_to_span's)."""
-    for q in range(3):
-        out[row, q] = out[row, 6 + q] = np.float32(np.inf)
-        out[row, 3 + q] = out[row, 9 + q] = np.float32(-np.inf)
+        min_rows(box, 0, prims, k)
+        min_rows(cen, 0, cents, k)
 
 
 # count of a node whose subtree is left to a task (build_region's top
@@ -182,53 +173,56 @@ DEFERRED = -4
 
 
 @kernel
-def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, child, count, stop_n,
+def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, box, child, count, stop_n,
                  task_s, task_e, task_d, task_span):
     """Binned-SAH subtree over primitives s0..e0-1 (their box and centroid
-    bounds span0 (12,), at depth depth0) into the scratch nodes root, root + 1, ...
+    bounds span0 (16,), at depth depth0) into the scratch nodes root, root + 1, ...
     (children in pairs after their parent, in the order build_region lays
     them out). A node of fewer than stop_n primitives is not split here:
     it is marked DEFERRED and listed in task_* (first, end, depth, span),
     for build_region's workers. Returns (one past the last node used, tasks).
-    bounds (m, 7): a primitive's box, then its number as int32 bits;
-    the partition moves its rows and the centroids' in place."""
+    prims, cents (m, 8): see ROW; the partition moves their rows in place."""
     st_node = np.empty(STACK, np.int64)
     st_s = np.empty(STACK, np.int64)
     st_e = np.empty(STACK, np.int64)
     st_d = np.empty(STACK, np.int64)
     # each row's box and centroid bounds, gathered by the parent's partition
     # as it moves the primitives (a pass of its own per node cost 4-8 %)
-    st_span = np.empty((STACK, 12), np.float32)
+    st_span = np.empty((STACK, 2 * ROW), np.float32)
     st_node[0], st_s[0], st_e[0], st_d[0] = root, s0, e0, depth0
-    for q in range(12):
+    for q in range(2 * ROW):
         st_span[0, q] = span0[q]
     top = 1
     alloc = root + 1
     n_tasks = 0
-    # bins start empty and are left empty: a node clears only those it filled
-    bin_n = np.ones((3, N_BINS), np.int64)       # all "filled", so that the next line clears all
-    bin_box = np.empty((3, N_BINS, 6), np.float32)
-    _clear_bins(bin_n, bin_box)
+    # bins start empty and are left empty: a node clears only those it
+    # filled (bit b of filled[a]: bin b of axis a), and its sweeps visit only
+    # those (scanning all 16 bins of each axis, twice, was a quarter of the build)
+    bin_n = np.zeros((3, N_BINS), np.int64)
+    bins = np.empty((3 * N_BINS, ROW), np.float32)
+    for r in range(3 * N_BINS):
+        _empty(bins, r, ROW)
     nonempty = np.empty(N_BINS, np.int64)     # an axis's bins that hold primitives
+    filled = np.zeros(3, np.int64)
     r_area = np.empty(N_BINS, np.float32)
     r_n = np.empty(N_BINS, np.int64)
-    spans = np.empty((2, 12), np.float32)     # the two children's, while partitioning
+    spans = np.empty((4, ROW), np.float32)    # the two children's (box, centroids), while partitioning
     scale = np.empty(3, np.float32)           # bins per unit of each axis, this node's
     while top > 0:
         top -= 1
         node, s, e, depth = st_node[top], st_s[top], st_e[top], st_d[top]
         n = e - s
-        lo0, lo1, lo2, hi0, hi1, hi2 = (st_span[top, 0], st_span[top, 1], st_span[top, 2],
-                                        st_span[top, 3], st_span[top, 4], st_span[top, 5])
-        c_lo0, c_lo1, c_lo2, c_hi0, c_hi1, c_hi2 = (st_span[top, 6], st_span[top, 7], st_span[top, 8],
-                                                    st_span[top, 9], st_span[top, 10], st_span[top, 11])
+        lo0, lo1, lo2 = st_span[top, 0], st_span[top, 1], st_span[top, 2]
+        hi0, hi1, hi2 = -st_span[top, 4], -st_span[top, 5], -st_span[top, 6]
+        c_lo0, c_lo1, c_lo2 = st_span[top, 8], st_span[top, 9], st_span[top, 10]
+        c_hi0, c_hi1, c_hi2 = -st_span[top, 12], -st_span[top, 13], -st_span[top, 14]
         box[node, 0], box[node, 1], box[node, 2] = lo0, lo1, lo2
         box[node, 3], box[node, 4], box[node, 5] = hi0, hi1, hi2
         if n < stop_n:
             child[node] = n_tasks
             count[node] = DEFERRED
             task_s[n_tasks], task_e[n_tasks], task_d[n_tasks] = s, e, depth
-            for q in range(12):
+            for q in range(2 * ROW):
                 task_span[n_tasks, q] = st_span[top, q]
             n_tasks += 1
             continue
@@ -244,11 +238,10 @@ def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, 
                 for a in range(3):
                     if scale[a] == 0:                  # not binned: c - lo may not be finite
                         continue
-                    b = min(int((centroids[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                    b = min(int((cents[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                     bin_n[a, b] += 1
-                    for q in range(3):
-                        bin_box[a, b, q] = min(bin_box[a, b, q], bounds[k, q])
-                        bin_box[a, b, 3 + q] = max(bin_box[a, b, 3 + q], bounds[k, 3 + q])
+                    filled[a] |= np.int64(1) << b
+                    min_rows(bins, a * N_BINS + b, prims, k)
             for a in range(3):
                 if scale[a] == 0:
                     continue
@@ -258,32 +251,39 @@ def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, 
                 # bin, which all cost the same, so the tree is the one a
                 # sweep over every bin makes (with a third of the build's time)
                 k_full = 0
-                for b in range(N_BINS):
-                    if bin_n[a, b] > 0:
-                        nonempty[k_full] = b
-                        k_full += 1
+                bits = filled[a]
+                while bits != 0:
+                    b = trailing_zeros(bits)
+                    bits &= bits - 1
+                    nonempty[k_full] = b
+                    k_full += 1
                 # right-to-left sweep: area and count of the full bins j..
-                x0 = y0 = z0 = np.float32(np.inf)
-                x1 = y1 = z1 = np.float32(-np.inf)
+                x0 = y0 = z0 = x1 = y1 = z1 = INF
                 cnt = 0
                 for j in range(k_full - 1, 0, -1):
                     b = nonempty[j]
                     cnt += bin_n[a, b]
-                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
+                    x0, y0, z0, x1, y1, z1 = _grow(bins, a * N_BINS + b, x0, y0, z0, x1, y1, z1)
                     r_n[j] = cnt
-                    r_area[j] = _area(x0, y0, z0, x1, y1, z1)
-                x0 = y0 = z0 = np.float32(np.inf)
-                x1 = y1 = z1 = np.float32(-np.inf)
+                    r_area[j] = _area(x0, y0, z0, -x1, -y1, -z1)
+                x0 = y0 = z0 = x1 = y1 = z1 = INF
                 cnt = 0
                 for j in range(k_full - 1):
                     b = nonempty[j]
                     cnt += bin_n[a, b]
-                    x0, y0, z0, x1, y1, z1 = _grow(bin_box, a, b, x0, y0, z0, x1, y1, z1)
-                    cost = (_area(x0, y0, z0, x1, y1, z1) * np.float32(cnt)
+                    x0, y0, z0, x1, y1, z1 = _grow(bins, a * N_BINS + b, x0, y0, z0, x1, y1, z1)
+                    cost = (_area(x0, y0, z0, -x1, -y1, -z1) * np.float32(cnt)
                             + r_area[j + 1] * np.float32(r_n[j + 1]))
                     if cost < best_cost:
                         best_cost, best_axis, best_bin = cost, a, b
-            _clear_bins(bin_n, bin_box)
+            for a in range(3):
+                bits = filled[a]
+                while bits != 0:
+                    b = trailing_zeros(bits)
+                    bits &= bits - 1
+                    bin_n[a, b] = 0
+                    _empty(bins, a * N_BINS + b, ROW)
+                filled[a] = 0
         area = _area(lo0, lo1, lo2, hi0, hi1, hi2)
         split_cost = C_TRAVERSE + C_INTERSECT * best_cost / area if area > 0 else np.float32(np.inf)
         leaf_cost = C_INTERSECT * np.float32(n)
@@ -298,33 +298,38 @@ def _build_nodes(bounds, centroids, max_leaf, s0, e0, depth0, span0, root, box, 
         left, right = top + 1, top
         if best_axis >= 0:
             a = best_axis
-            _empty_span(spans, 0)
-            _empty_span(spans, 1)
+            _empty(spans, 0, ROW)
+            _empty(spans, 1, ROW)
+            _empty(spans, 2, ROW)
+            _empty(spans, 3, ROW)
             i, j = s, e - 1
             while i <= j:
-                b = min(int((centroids[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                b = min(int((cents[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
                 if b <= best_bin:
-                    _add_to_span(bounds, centroids, i, spans, 0)
+                    min_rows(spans, 0, prims, i)
+                    min_rows(spans, 1, cents, i)
                     i += 1
                 else:
-                    for q in range(7):               # the box and, in column 6, the primitive
-                        bounds[i, q], bounds[j, q] = bounds[j, q], bounds[i, q]
-                    for q in range(3):
-                        centroids[i, q], centroids[j, q] = centroids[j, q], centroids[i, q]
-                    _add_to_span(bounds, centroids, j, spans, 1)
+                    swap_rows(prims, i, j)
+                    swap_rows(cents, i, j)
+                    min_rows(spans, 2, prims, j)
+                    min_rows(spans, 3, cents, j)
                     j -= 1
             mid = i
             split_axis = a
+            if not (mid == s or mid == e):
+                for q in range(ROW):
+                    st_span[left, q] = spans[0, q]
+                    st_span[left, ROW + q] = spans[1, q]
+                    st_span[right, q] = spans[2, q]
+                    st_span[right, ROW + q] = spans[3, q]
         else:
             mid = s + n // 2
             split_axis = 0
         if mid == s or mid == e or best_axis < 0:
             mid = s + n // 2
-            _span(bounds, centroids, s, mid, spans, 0)
-            _span(bounds, centroids, mid, e, spans, 1)
-        for q in range(12):
-            st_span[left, q] = spans[0, q]
-            st_span[right, q] = spans[1, q]
+            _span(prims, cents, s, mid, st_span, left)
+            _span(prims, cents, mid, e, st_span, right)
         child[node] = alloc
         count[node] = -1 - split_axis
         st_node[top], st_s[top], st_e[top], st_d[top] = alloc + 1, mid, e, depth + 1
@@ -385,16 +390,22 @@ MIN_TASK = 256
 
 
 @kernel
-def _start_build(bounds, centroids, boxed, span0):
-    """boxed (m, 7): each primitive's box, then its number as int32 bits;
-    span0[0]: the box and centroid bounds of them all (numpy's axis-0
+def _start_build(bounds, centroids, prims, cents, span0):
+    """prims, cents (m, 8) (see ROW) from each primitive's box and centroid;
+    span0[0] (16): the box and centroid bounds of them all (numpy's axis-0
     min and max took 9 ms on 77K triangles, a fifth of the build)."""
-    boxed_i = boxed.view(np.int32)
+    prims_i = prims.view(np.int32)
     for i in range(bounds.shape[0]):
-        for q in range(6):
-            boxed[i, q] = bounds[i, q]
-        boxed_i[i, 6] = i
-    _span(bounds, centroids, 0, bounds.shape[0], span0, 0)
+        for q in range(3):
+            prims[i, q] = bounds[i, q]
+            prims[i, 4 + q] = -bounds[i, 3 + q]
+            cents[i, q] = centroids[i, q]
+            cents[i, 4 + q] = -centroids[i, q]
+        prims_i[i, 3] = i
+        prims[i, 7] = np.float32(0.0)
+        cents[i, 3] = np.float32(0.0)
+        cents[i, 7] = np.float32(0.0)
+    _span(prims, cents, 0, bounds.shape[0], span0, 0)
 
 
 def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
@@ -403,8 +414,8 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     `order` (m,) receives the primitives in leaf order: leaf k's references
     are order[child[k] - ref0 ...] (child counts from the caller's
     reference base ref0). Returns the nodes used and the tree's SAH cost
-    (sah_cost's, summed while laying it out). centroids are reordered
-    as the build partitions them (bounds are copied first).
+    (sah_cost's, summed while laying it out). bounds and centroids are
+    read only (copied into the build's rows, see ROW).
 
     The nodes above ~m / TASKS_PER_TREE primitives are split on one thread;
     the subtrees below them by n_workers threads into disjoint scratch
@@ -412,10 +423,10 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     would, so the tree does not depend on the thread count (nor on whether
     it was built in parallel at all)."""
     m = bounds.shape[0]
-    # a primitive's number travels with its box (column 6, as int32 bits)
-    boxed = np.empty((m, 7), np.float32)
-    span0 = np.empty((1, 12), np.float32)
-    _start_build(bounds, centroids, boxed, span0)
+    prims = np.empty((m, ROW), np.float32)
+    cents = np.empty((m, ROW), np.float32)
+    span0 = np.empty((1, 2 * ROW), np.float32)
+    _start_build(bounds, centroids, prims, cents, span0)
     # a binary tree over m primitives has at most 2m - 1 nodes: the top
     # phase's first, then each task's from 2 x its first primitive on
     n_scratch = 4 * m + 1
@@ -425,8 +436,8 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     stop_n = max(m // TASKS_PER_TREE, MIN_TASK) if n_workers > 1 and m >= 2 * MIN_TASK else 0
     n_max = m + 1 if stop_n else 1          # tasks hold disjoint runs of primitives
     task_s, task_e, task_d = (np.empty(n_max, np.int64) for _ in range(3))
-    task_span = np.empty((n_max, 12), np.float32)
-    top_end, n_tasks = _build_nodes(boxed, centroids, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count,
+    task_span = np.empty((n_max, 2 * ROW), np.float32)
+    top_end, n_tasks = _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count,
                                     stop_n, task_s, task_e, task_d, task_span)
     task_root = top_end + 2 * task_s[:n_tasks]
     if n_tasks:
@@ -434,7 +445,7 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
 
         def work():
             for t in tasks:
-                _build_nodes(boxed, centroids, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
+                _build_nodes(prims, cents, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
                              task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
 
         pool = thread_pool("bvh-build", n_workers - 1)
@@ -442,7 +453,7 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
         work()
         for h in helpers:
             h.result()
-    order[:] = boxed.view(np.int32)[:, 6]
+    order[:] = prims.view(np.int32)[:, 3]
     return _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count)
 
 

@@ -544,3 +544,50 @@ def test_a_tree_built_by_many_threads_is_the_one_built_by_one(rng, monkeypatch):
             boxed = inside[0] <= inside[1]                 # empty boxes (no finite corner) hold nothing
             assert np.all((inside[0] >= lo) | ~boxed) and np.all((inside[1] <= hi) | ~boxed), (name, i)
         assert np.all(seen == 1), name
+
+
+def test_the_row_vector_min_and_swap_are_numpys(rng):
+    """row8's intrinsics (the build's 8-lane box arithmetic) against numpy,
+    with infinities (empty boxes) and signed zeros among the lanes."""
+    from numba import njit
+    from raycore.row8 import min_rows, swap_rows
+
+    @njit
+    def run(dst, src, pairs):
+        for p in range(pairs.shape[0]):
+            min_rows(dst, pairs[p, 0], src, pairs[p, 1])
+        swap_rows(dst, 0, dst.shape[0] - 1)
+
+    dst = rng.normal(size=(6, 8)).astype(np.float32)
+    src = rng.normal(size=(5, 8)).astype(np.float32)
+    dst[1, 2], src[3, 4], src[0, 0] = np.inf, -np.inf, -0.0
+    pairs = rng.integers(0, 5, size=(40, 2))
+    expect = dst.copy()
+    for i, k in pairs:
+        expect[i] = np.where(expect[i] < src[k], expect[i], src[k])
+    expect[[0, -1]] = expect[[-1, 0]]
+    run(dst, src, pairs)
+    assert np.array_equal(dst.view(np.uint32), expect.view(np.uint32))
+
+
+def test_every_built_box_is_the_exact_bound_of_its_triangles(rng):
+    """The build's boxes (kept as lo and -hi rows while it splits) are exactly
+    the corners' bounds: a leaf's of its triangles, an inner node's of its
+    children's; every triangle is in one leaf."""
+    from conftest import soup
+    tv = soup(rng, 3000, spread=20.0)
+    tv[:50] *= np.float32(1e-6)                             # tiny ones at the origin among them
+    bvh = SceneBvh.of_objects(len(tv)).update(tv)
+    seen = []
+    for i in range(len(bvh.count)):
+        c = bvh.count[i]
+        if c > 0:
+            ids = bvh.tri[bvh.child[i]:bvh.child[i] + c]
+            seen += list(ids)
+            corners = tv[ids].reshape(-1, 3)
+            assert np.array_equal(bvh.box[i, :3], corners.min(0)) and np.array_equal(bvh.box[i, 3:], corners.max(0))
+        elif bvh.child[i] >= 0:
+            kids = bvh.box[bvh.child[i]:bvh.child[i] + 2]
+            assert np.array_equal(bvh.box[i, :3], kids[:, :3].min(0))
+            assert np.array_equal(bvh.box[i, 3:], kids[:, 3:].max(0))
+    assert sorted(seen) == list(range(len(tv)))
