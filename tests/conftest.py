@@ -59,20 +59,9 @@ def pytest_sessionstart(session):
         return
     import subprocess
     COLD_START.parent.mkdir(parents=True, exist_ok=True)
-    demo = str(ROOT / "anim/builtin/demo/anim.yaml")
-    subprocess.run([sys.executable, "-m", "cli.main", "render", demo,
+    subprocess.run([sys.executable, "-m", "cli.main", "render", str(ROOT / "anim/builtin/demo/anim.yaml"),
                     "-o", str(COLD_START), "--frames", "0:1", "--res", "64x64", "-q"], cwd=ROOT, check=False,
                    capture_output=True)
-    # then, side by side, the kernels most tests take beyond the demo's: the
-    # BVH's and kd-tree's camera rays, several passes a pixel, the error budget
-    if os.environ.get("FRUSTRACE_TEST_PRECOMPILE", "1") != "0":
-        others = [["--accel", "bvh", "--spp", "4", "--shutter", "0.5"], ["--accel", "kdtree", "--max-error", "0.05"]]
-        runs = [subprocess.Popen([sys.executable, "-m", "cli.main", "render", demo, "-o",
-                                  str(COLD_START.parent / f"precompile_{k}"), "--frames", "0:1", "--res", "64x64",
-                                  "-q", "--overwrite", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.DEVNULL) for k, args in enumerate(others)]
-        for run in runs:
-            run.wait()
 
 
 # the longest test files, longest first (pytest --durations, 2026-12-03: faults
