@@ -99,9 +99,12 @@ def load(key):
         with np.load(path, allow_pickle=False) as entry:
             vertices, faces = entry["vertices"], entry["faces"]
             uvs = entry["uvs"] if "uvs" in entry.files else None
-        os.utime(path)                              # recently used: pruned last
     except Exception:                               # absent, cut short, foreign: a miss
         return None
+    try:
+        os.utime(path)                              # recently used: pruned last
+    except OSError:                                 # a cache shared read-only: still a hit
+        pass
     if vertices.dtype != np.float32 or faces.dtype != np.int32 or vertices.ndim != 2 or faces.ndim != 2:
         return None
     return vertices, faces, uvs

@@ -179,3 +179,18 @@ def test_a_warm_demo_start_imports_neither_trimesh_nor_scipy_spatial(tmp_path):
     warm = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert "trimesh" in cold.stdout                    # parsed once (trimesh brings scipy.spatial)
     assert warm.stdout.strip() == "[]"
+
+
+def test_a_read_only_cache_still_hits(tmp_path, cache, monkeypatch):
+    """A cache shared read-only (its entries' times cannot be touched) is
+    still read, not parsed around."""
+    path = tmp_path / "t.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    mesh_io.load_mesh(path, "s.yaml", "k")
+
+    def refuse(*args, **kwargs):
+        raise PermissionError("read-only")
+    monkeypatch.setattr(os, "utime", refuse)
+    monkeypatch.setattr(mesh_io, "_parse", lambda *a: pytest.fail("a cached mesh was parsed again"))
+    v, f, _ = mesh_io.load_mesh(path, "s.yaml", "k")
+    assert v.shape == (3, 3) and f.shape == (1, 3)
