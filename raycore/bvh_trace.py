@@ -14,7 +14,7 @@ from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .counters import FALLBACK_RAYS, N_COUNTERS, PACKETS
 from .shadow_rays import directional_light_ray, point_light_ray
 from .thread_pool import on_threads
-from .tile_queue import next_tile
+from .tile_queue import new_queue, next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
            "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "scratch", "trace_batch",
@@ -257,11 +257,6 @@ def _workers():
     return numba.get_num_threads()
 
 
-def _queue():
-    """tile_queue's counter, for workers started from Python."""
-    return np.zeros(1, np.int64)
-
-
 def _counters(n_rays):
     return np.zeros((max(1, -(-n_rays // PACKET)), N_COUNTERS), np.int64)
 
@@ -274,7 +269,7 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
     counters = _counters(rays.n_active)
     mode = SHARED_ORIGIN if rays.shared_origin else SHARED_DIRECTION
     on_threads(trace_batch, _workers(), bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min,
-               rays.t_max, True, mode, _queue(), *NO_HITS, vis, counters)
+               rays.t_max, True, mode, new_queue(), *NO_HITS, vis, counters)
     return vis, counters.sum(axis=0)
 
 
@@ -288,7 +283,7 @@ def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):
     skip = NO_SKIP if skip is None else np.ascontiguousarray(skip, np.bool_)
     live = on_threads(trace_light_samples, _workers(), bvh, np.ascontiguousarray(lights, np.float32),
                       np.asarray(rows, np.int64), surface.lifted, surface.geo_n, surface.smooth_n, surface.mag,
-                      np.float32(EPS_OFFSET_ULPS), skip, _queue(), vis, counters)
+                      np.float32(EPS_OFFSET_ULPS), skip, new_queue(), vis, counters)
     return int(sum(live)), counters.sum(axis=0)
 
 
@@ -311,7 +306,7 @@ def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=Fals
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     counters = _counters(n)
     on_threads(trace_batch, _workers(), bvh, np.arange(n, dtype=np.int32), n, np.ascontiguousarray(origins.T),
-               np.ascontiguousarray(dirs.T), t_min, t_max, any_hit, mode, _queue(), *out, np.zeros(0, np.float32),
+               np.ascontiguousarray(dirs.T), t_min, t_max, any_hit, mode, new_queue(), *out, np.zeros(0, np.float32),
                counters)
     return (*out, counters.sum(axis=0))
 
@@ -324,5 +319,5 @@ def bvh_trace_camera(bvh: Bvh, cam, width, height, jitter=(0.5, 0.5), out=None):
     n_tiles = -(-width // 8) * -(-height // 8)
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     on_threads(trace_camera_bvh, _workers(), bvh, cam, width, height, np.float32(jitter[0]),
-               np.float32(jitter[1]), _queue(), *out, counters)
+               np.float32(jitter[1]), new_queue(), *out, counters)
     return (*out, counters.sum(axis=0))

@@ -30,7 +30,7 @@ from .counters import CANDIDATES, FALLBACK_RAYS, N_COUNTERS, PACKETS, TESTS, VIS
 from .kdtree_build import LEAF, KdTree
 from .kdtree_rays import STACK, trace_one
 from .thread_pool import on_threads
-from .tile_queue import next_tile, tile_corner, tile_count
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
@@ -347,5 +347,5 @@ def kd_trace_camera(tree: KdTree, tri_verts, cam, width, height, packet=8, jitte
     n_tiles = -(-width // tile) * -(-height // tile)
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     on_threads(trace_camera_kd, numba.get_num_threads(), cam, width, height, np.float32(jitter[0]),
-               np.float32(jitter[1]), packet, tile, np.zeros(1, np.int64), tree, tri_verts, *out, counters)
+               np.float32(jitter[1]), packet, tile, new_queue(), tree, tri_verts, *out, counters)
     return (*out, counters.sum(axis=0))

@@ -13,7 +13,7 @@ from .config import EPS_KD_SPLIT_REL
 from .counters import CANDIDATES, N_COUNTERS, TESTS, VISITS
 from .kdtree_build import LEAF, KdTree
 from .thread_pool import on_threads
-from .tile_queue import next_tile
+from .tile_queue import new_queue, next_tile
 from .triangle import ray_axes, woop_test
 
 F0 = np.float32(0.0)
@@ -148,7 +148,7 @@ def kd_trace_rays(tree: KdTree, tri_verts, origins, dirs, t_min=None, t_max=None
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))
     counters = np.zeros((max(1, -(-n // KD_RAY_CHUNK)), N_COUNTERS), np.int64)
     on_threads(trace_kd_rays, numba.get_num_threads(), tree, tri_verts, origins, dirs, t_min, t_max, any_hit,
-               KD_RAY_CHUNK, np.zeros(1, np.int64), *out, counters)
+               KD_RAY_CHUNK, new_queue(), *out, counters)
     return (*out, counters.sum(axis=0))
 
 

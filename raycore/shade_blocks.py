@@ -33,7 +33,7 @@ from .counters import N_COUNTERS
 from .launch import call_native, on_omp_threads
 from .shade import shade_rows, write_block
 from .surface import GATHER_BLOCK, fill_block
-from .tile_queue import next_tile, tile_corner, tile_count
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
 
 F32 = np.float32
 # worker statistics: cycles in the sweep, cycles tracing shadow rays, active shadow rays, visible samples
@@ -137,7 +137,7 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
     counters = np.zeros((n_blocks if shadows else 1, N_COUNTERS), np.int64)
     n_workers = numba.get_num_threads()
     stats = np.zeros((n_workers, 4), np.int64)
-    queue = np.zeros(1, np.int64)           # tile_queue's counter
+    queue = new_queue()
     args = (cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off, tri_verts,
             faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh if shadows else NO_BVH, lights,
             np.ascontiguousarray(lights[rows, :4]), rows, F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg,

@@ -13,9 +13,9 @@ import numpy as np
 from ._jit import fetch_add, helper, kernel
 
 
-@helper
 def new_queue():
-    """An empty work queue: the counter next_tile advances."""
+    """An empty work queue: the counter next_tile advances, one for all the
+    workers of a call (launch.py or thread_pool.on_threads starts them)."""
     return np.zeros(1, np.int64)
 
 

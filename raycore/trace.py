@@ -13,7 +13,7 @@ from .packet_layout import swizzle_offsets, unswizzle
 from .shadow_rays import SHADOW_PACKET, LightRays
 from .surface import Surface, visible_surface
 from .thread_pool import on_threads
-from .tile_queue import tile_size_for
+from .tile_queue import new_queue, tile_size_for
 
 # Sub-packet size for culling and the vectorized ray loop. 4x4 cut the ray
 # tests by a third but ran 2.5x slower (per-loop overhead); 8x8 measured best.
@@ -95,7 +95,7 @@ def trace_camera(grid: Grid, tri_verts, cam, width, height, packet=8, jitter=(0.
         out = camera_buffers(width, height, packet)
     sw_t, sw_prim, sw_b1, sw_b2 = out.swizzled
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
-    args = (np.zeros(1, np.int64), cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), packet, sub,
+    args = (new_queue(), cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]), packet, sub,
             tile, grid, tri_verts, _cull_eps(grid), sw_t, sw_prim, sw_b1, sw_b2, counters, cull)
     on_omp_threads(trace_primary_on_threads, trace_primary, threads, *args)
     flat = (sw_t.reshape(-1), sw_prim.reshape(-1), sw_b1.reshape(-1), sw_b2.reshape(-1))
@@ -123,7 +123,7 @@ def light_visibility(grid: Grid, tri_verts, rays: LightRays, vis=None, packet=SH
     n_packets = max(1, -(-rays.n_active // (packet * packet)))
     counters = np.zeros((n_packets, N_COUNTERS), np.int64)
     on_threads(trace_ray_batch, threads, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min,
-               rays.t_max, packet, sub, np.zeros(1, np.int64), True, rays.shared_origin, grid, tri_verts,
+               rays.t_max, packet, sub, new_queue(), True, rays.shared_origin, grid, tri_verts,
                _cull_eps(grid), *NO_HITS, vis, counters, cull)
     return vis, counters.sum(axis=0)
 
@@ -173,6 +173,6 @@ def trace_rays(grid: Grid, tri_verts, origins, dirs, t_min=None, t_max=None, pac
     counters = np.zeros((max(1, -(-n // (packet * packet))), N_COUNTERS), np.int64)
     order = np.arange(n, dtype=np.int32)
     on_threads(trace_ray_batch, threads, order, n, np.ascontiguousarray(origins.T), np.ascontiguousarray(dirs.T),
-               t_min, t_max, packet, sub, np.zeros(1, np.int64), any_hit, False, grid, tri_verts, _cull_eps(grid),
+               t_min, t_max, packet, sub, new_queue(), any_hit, False, grid, tri_verts, _cull_eps(grid),
                out_t, out_prim, out_b1, out_b2, NO_HITS[0], counters, True)
     return Hits(out_t, out_prim, out_b1, out_b2, counters.sum(axis=0))
