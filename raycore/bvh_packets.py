@@ -10,10 +10,15 @@ stack. A node is skipped when
      for other packets, interval arithmetic over the rays' origins and
      inverse directions proves no ray can enter it: a few scalar
      operations, and
-  2. otherwise when no live ray's slab test hits it: one branch-free loop
-     over the packet that LLVM vectorizes.
-A leaf's triangles are tested against every ray of the packet in one
-vectorized loop per triangle: the watertight Woop test with one axis
+  2. otherwise when no live ray's slab test hits it, tested a 16-ray chunk
+     (one AVX-512 vector) at a time, branch-free within the chunk. Each
+     stack entry carries the chunks that reached its parent's box (a ray
+     that misses a box misses everything inside it): an inner node tests
+     those chunks in order up to the first that hits and passes it and
+     every later one on (Wald 2007's first active ray, at the grain of a
+     vector), a leaf tests them all and keeps those that hit.
+A leaf's triangles are tested against every ray of those chunks in one
+vectorized loop per triangle and chunk: the watertight Woop test with one axis
 permutation for the packet (the shear axis where every ray's direction is
 furthest from zero) and each ray's own shear. The cheaper test by edge
 planes through a shared origin (three dot products per ray) is not used:
@@ -54,6 +59,12 @@ MIN_SHEAR_SHARE = np.float32(0.5)  # a packet's shear axis holds >= half of ever
 # slower than 128 (runner 23 %, hand 11 %), measured in one process on
 # captured rays, interleaved, 2026-12-03
 PACKET = 128
+# a packet's rays in chunks of LANES (one AVX-512 vector of float32): a node
+# is tested, and a leaf's triangles intersected, only for the chunks with a
+# ray that reached its parent's box
+LANES = 16
+N_CHUNKS = PACKET // LANES
+CHUNK_BITS = 8                   # a stack entry's low bits: its chunks (N_CHUNKS <= CHUNK_BITS)
 # rows of a packet's ray array (N_ROWS, PACKET), read-only while it walks;
 # PU, PV, PK: the origin permuted to the packet's axes, SU, SV, SZ: the
 # ray's shear (Woop). Hits go to separate arrays (h_t, h_b1, h_b2, prim): a store into
@@ -277,15 +288,13 @@ def _ia_misses(box, i, ia):
 
 
 @helper
-def _any_ray_hits_box(ray, h_t, n, box, i):
-    """True when some ray's [t_min, t_max] overlaps box i: one branch-free
-    loop over the whole packet, which LLVM vectorizes (measured 1.6x faster
-    than a scalar scan that stops at the first ray that hits, Wald 2007's
-    first-active-ray test, in these packets of rays from many surfaces)."""
-    x0, y0, z0 = box[i, 0], box[i, 1], box[i, 2]
-    x1, y1, z1 = box[i, 3], box[i, 4], box[i, 5]
+def _chunk_hits_box(ray, h_t, c0, x0, y0, z0, x1, y1, z1):
+    """True when some ray of the LANES rays from c0 on has its [t_min,
+    t_max] overlap the box (x0, y0, z0)-(x1, y1, z1): a branch-free loop of
+    a constant LANES iterations, one AVX-512 vector."""
     hit = False
-    for r in range(n):
+    for lane in range(LANES):
+        r = c0 + lane
         ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
         ix, iy, iz = ray[IX, r], ray[IY, r], ray[IZ, r]
         ax = (x0 - ox) * ix
@@ -301,10 +310,31 @@ def _any_ray_hits_box(ray, h_t, n, box, i):
 
 
 @helper
-def _push_children(stack, top, left, left_first):
-    """Push the children of a node, the one to visit first on top; the new top."""
-    stack[top] = left + 1 if left_first else left
-    stack[top + 1] = left if left_first else left + 1
+def _chunks_hitting_box(ray, h_t, mask, box, i, exact):
+    """Of the chunks in `mask` (bit c: rays c*LANES..c*LANES+LANES-1), those
+    that may have a ray whose [t_min, t_max] overlaps box i, as a mask (0:
+    none does). A ray that misses a node misses its children, so they test
+    only these chunks. Not exact: the chunks are tested in order up to the
+    first that hits, which keeps every later one (Wald 2007's first active
+    ray, at the grain of a vector: a node that the packet's first rays hit
+    costs one vector test); exact: every chunk is tested."""
+    x0, y0, z0 = box[i, 0], box[i, 1], box[i, 2]
+    x1, y1, z1 = box[i, 3], box[i, 4], box[i, 5]
+    out = 0
+    for c in range(N_CHUNKS):
+        if (mask >> c) & 1 and _chunk_hits_box(ray, h_t, c * LANES, x0, y0, z0, x1, y1, z1):
+            if not exact:
+                return (mask >> c) << c
+            out |= 1 << c
+    return out
+
+
+@helper
+def _push_children(stack, top, left, left_first, mask):
+    """Push the children of a node with the chunks that reach it (a stack
+    entry: node << CHUNK_BITS | mask), the one to visit first on top; the new top."""
+    stack[top] = ((left + 1 if left_first else left) << CHUNK_BITS) | mask
+    stack[top + 1] = ((left if left_first else left + 1) << CHUNK_BITS) | mask
     return top + 2
 
 
@@ -327,15 +357,22 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     if kz < 0:
         return False
     sgn = (sgn_x, sgn_y, sgn_z)
+    # the last chunk filled up with dead copies of ray 0 (t_max -inf: no box
+    # or triangle test passes for them)
+    n_pad = min(PACKET, (n + LANES - 1) // LANES * LANES)
+    for r in range(n, n_pad):
+        for q in range(TMIN + 1):
+            ray[q, r] = ray[q, 0]
+        h_t[r] = -INF
     # the rays in the frame of the Woop test: origin permuted, own shear
     row_u = OX + kx
     row_v = OX + ky
     row_k = OX + kz
-    for r in range(n):
+    for r in range(n_pad):
         ray[PU, r] = ray[row_u, r]
         ray[PV, r] = ray[row_v, r]
         ray[PK, r] = ray[row_k, r]
-    for r in range(n):
+    for r in range(n_pad):
         inv = F1 / ray[DX + kz, r]
         ray[SU, r] = ray[DX + kx, r] * inv
         ray[SV, r] = ray[DX + ky, r] * inv
@@ -350,30 +387,34 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     n_visits = 0
     n_tests = 0
     n_leaves = 0
-    stack[0] = 0
+    stack[0] = (1 << ((n + LANES - 1) // LANES)) - 1        # the root, every chunk
     top = 1
     while top > 0:
         top -= 1
-        i = stack[top]
+        i = stack[top] >> CHUNK_BITS
+        mask = stack[top] & ((1 << CHUNK_BITS) - 1)
         n_visits += 1
         # the packet's frustum where it has one (tighter), else interval arithmetic
         if _frustum_misses(box, i, planes, n_planes) if n_planes > 0 else _ia_misses(box, i, ia):
             continue
-        if not _any_ray_hits_box(ray, h_t, n, box, i):
-            continue
         c = node_i[i, COUNT]
+        # inner nodes: up to the first chunk that hits; leaves: every chunk,
+        # which the triangle tests then skip
+        mask = _chunks_hitting_box(ray, h_t, mask, box, i, c > 0)
+        if mask == 0:
+            continue
         if c <= 0:
             left = node_i[i, CHILD]
             if left < 0:
                 continue
-            top = _push_children(stack, top, left, sgn[-1 - c])
+            top = _push_children(stack, top, left, sgn[-1 - c], mask)
             continue
         n_leaves += 1
         ref0 = node_i[i, CHILD]
-        # every ray of the packet: a loop over only the rays that reach the
-        # leaf (from an offset index) measured 1.7x slower than this vectorized one
+        # every ray of the chunks that reach the leaf, a vector at a time: a
+        # loop over only the rays that reach it (from an offset index)
+        # measured 1.7x slower than a vectorized one over the packet
         for k in range(ref0, ref0 + c):
-            n_tests += n
             v = (verts[k, 0], verts[k, 1], verts[k, 2], verts[k, 3], verts[k, 4], verts[k, 5],
                  verts[k, 6], verts[k, 7], verts[k, 8])
             ax, ay, az = v[kx], v[ky], v[kz]
@@ -381,26 +422,34 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
             cx, cy, cz = v[6 + kx], v[6 + ky], v[6 + kz]
             # an or-reduction, not a count: an int64 count halves the vector width
             some = False
-            if vis_only:
-                # shadow rays: only whether something is hit (one store, not four)
-                for r in range(n):
-                    ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
-                    hit, t, _b1, _b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
-                                                 cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
-                    hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
-                    some = some | hit
-                    h_t[r] = -INF if hit else h_t[r]
-            else:
-                for r in range(n):
-                    ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
-                    hit, t, b1, b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
-                                               cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
-                    hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
-                    some = some | hit
-                    h_t[r] = (-INF if any_hit else t) if hit else h_t[r]
-                    h_b1[r] = b1 if hit else h_b1[r]
-                    h_b2[r] = b2 if hit else h_b2[r]
-                    prim[r] = k if hit else prim[r]
+            for ch in range(N_CHUNKS):
+                if not (mask >> ch) & 1:
+                    continue
+                n_tests += LANES
+                c0 = ch * LANES
+                if vis_only:
+                    # shadow rays: only whether something is hit (one store, not four)
+                    for lane in range(LANES):
+                        r = c0 + lane
+                        ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
+                        hit, t, _b1, _b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
+                                                     cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r],
+                                                     ray[SZ, r])
+                        hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
+                        some = some | hit
+                        h_t[r] = -INF if hit else h_t[r]
+                else:
+                    for lane in range(LANES):
+                        r = c0 + lane
+                        ou, ov, ok = ray[PU, r], ray[PV, r], ray[PK, r]
+                        hit, t, b1, b2 = woop_test(ax - ou, ay - ov, az - ok, bx - ou, by - ov, bz - ok,
+                                                   cx - ou, cy - ov, cz - ok, ray[SU, r], ray[SV, r], ray[SZ, r])
+                        hit = hit & (t > ray[TMIN, r]) & (t < h_t[r])
+                        some = some | hit
+                        h_t[r] = (-INF if any_hit else t) if hit else h_t[r]
+                        h_b1[r] = b1 if hit else h_b1[r]
+                        h_b2[r] = b2 if hit else h_b2[r]
+                        prim[r] = k if hit else prim[r]
             if any_hit and some:
                 live = 0
                 for r in range(n):
@@ -485,7 +534,10 @@ def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, coun
             left = node_i[i, CHILD]
             if left < 0:
                 continue
-            top = _push_children(stack, top, left, d[-1 - c] >= F0)
+            left_first = d[-1 - c] >= F0
+            stack[top] = left + 1 if left_first else left
+            stack[top + 1] = left if left_first else left + 1
+            top += 2
             continue
         counters[row, CANDIDATES] += 1
         first = node_i[i, CHILD]

@@ -85,6 +85,38 @@ def test_every_packet_mode_matches_brute_force(rng, mode, any_hit):
     _check(bvh, tv, o, _adversarial_dirs(rng, tv, lambda s: o[s]), any_hit, MODES[mode])
 
 
+@pytest.mark.parametrize("any_hit", [False, True])
+def test_ragged_packets_and_partly_live_chunks_match_brute_force(rng, any_hit):
+    """Packets whose last 16-ray chunk is part filled (n not a multiple of
+    16, the pad rays must never hit), and packets where some chunks' rays
+    are all dead or miss a node that others enter (the chunk masks)."""
+    tv = _scene(rng)
+    bvh = SceneBvh.of_objects(len(tv), [(0, 320)]).update(tv)
+    o800 = np.ascontiguousarray(np.broadcast_to(np.array((0.0, 6.0, 2.0), np.float32), (800, 3)))
+    for n in (1, 5, 17, 100, 127, 133, 261):
+        d = np.ascontiguousarray(_adversarial_dirs(rng, tv, lambda s: o800[s])[rng.permutation(800)[:n]])
+        _check(bvh, tv, o800[:n], d, any_hit, SHARED_ORIGIN)
+    # every other chunk of each packet dead (t_max < t_min): they find
+    # nothing, and the live rays beside them what brute force finds
+    n = 512
+    o = np.ascontiguousarray(np.broadcast_to(np.array((0.2, 0.1, 0.3), np.float32), (800, 3)))
+    d = _adversarial_dirs(rng, tv, lambda s: o[s])[rng.permutation(800)[:n]]
+    o = o[:n]
+    dead = (np.arange(n) // 16) % 2 == 1
+    t_max = np.where(dead, -1.0, np.inf).astype(np.float32)
+    got = bvh_trace_rays(bvh, o, np.ascontiguousarray(d), t_max=t_max, any_hit=any_hit, mode=SHARED_ORIGIN)
+    assert np.all(got[1][dead] == -1)
+    live = ~dead
+    want = brute_force_closest(o[live], d[live], np.zeros(live.sum(), np.float32),
+                               np.full(live.sum(), np.inf, np.float32), tv)
+    got = tuple(a[live] for a in got[:4])
+    if not any_hit:
+        _agree(got, want, tv)
+    else:
+        edge = _edge(got[1] >= 0, got[2], got[3]) | _edge(want[1] >= 0, want[2], want[3])
+        assert not np.any(((got[1] >= 0) != (want[1] >= 0)) & ~edge)
+
+
 def _check(bvh, tv, o, d, any_hit, mode):
     n = len(o)
     t_min = np.zeros(n, np.float32)
