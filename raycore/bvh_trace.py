@@ -202,6 +202,30 @@ def trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offse
 
 
 @kernel
+def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters, row,
+                            ray, h_t, h_b1, h_b2, prim, ia, planes, stack, live):
+    """trace_block_lights, its active rays added to live[0]: the form the
+    sweep calls through its machine-code address (launch.call_native: no
+    result), so that the packet walk is compiled on its own, and only when
+    a frame has shadow rays, not linked into every sweep."""
+    live[0] += trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters,
+                                  row, ray, h_t, h_b1, h_b2, prim, ia, planes, stack)
+
+
+def block_lights_entry(bvh, lights, rows, counters, n_lights) -> int:
+    """The address of trace_block_lights_into compiled for the buffers
+    shade_blocks.shade_blocks calls it with (GATHER_BLOCK^2 samples, scratch()'s
+    packet buffers, int64 scalars); n_lights: the vis buffer's rows."""
+    from .launch import native_entry
+    from .surface import GATHER_BLOCK
+    m = GATHER_BLOCK * GATHER_BLOCK
+    rows3 = np.empty((3, m), np.float32)
+    return native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(0), rows3, rows3, rows3,
+                        np.empty(m, np.float32), np.float32(0), np.empty((n_lights, m), np.float32), counters,
+                        np.int64(0), *scratch.py_func(), np.zeros(1, np.int64))
+
+
+@kernel
 def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters):
     """Closest hits of the camera rays (offset jx, jy), row-major: the
     8x8-pixel packets sharing the eye that this thread pulls from `queue`

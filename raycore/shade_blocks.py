@@ -27,7 +27,7 @@ from numba import prange
 
 from ._jit import cycle_count, kernel, parallel_kernel
 from .bvh_build import empty_bvh
-from .bvh_trace import scratch, trace_block_lights
+from .bvh_trace import block_lights_entry, scratch
 from .config import EPS_OFFSET_ULPS
 from .counters import N_COUNTERS
 from .launch import call_native, on_omp_threads
@@ -44,12 +44,14 @@ NO_BVH = empty_bvh(1, 0)            # the tree's stand-in when there are no shad
 @kernel
 def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts, faces, normals,
                  tri_material, materials, uvs, tex_data, tex_info, bvh, lights, shadow_lights, rows,
-                 offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba, z, counters, stats):
+                 offset_ulps, shadows, shadow_entry, ambient, bg, weight, accumulate, queue, rgba, z, counters,
+                 stats):
     """One thread's share of a camera pass's pixels (shade_image starts one
     per thread, shade_blocks_on_threads): GATHER_BLOCK^2-pixel blocks pulled from `queue` until none
     are left, each gathered (hits of pixel (x, y) at row_off[y] +
     col_off[x]), shadowed (when shadows: lights shadow_lights (m, 4) into
-    vis rows `rows`, as bvh_trace.trace_light_samples), shaded with every
+    vis rows `rows`, as bvh_trace.trace_light_samples, through
+    trace_block_lights_into at address shadow_entry), shaded with every
     light of `lights` (shade.py's table) and written into rgba (H*W, 4) and
     z (H*W,) as shade.write_pixels does, on this thread's buffers. stats
     (4,): this worker's TOTAL and SHADOW cycles, LIVE shadow rays and
@@ -81,6 +83,7 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
     spec_w = np.empty(m, F32)
     cos_h = np.empty(m, F32)
     ray, h_t, h_b1, h_b2, prim_r, ia, planes, stack = scratch()
+    live = np.zeros(1, np.int64)
     while True:
         b = next_tile(queue, n_blocks)
         if b < 0:
@@ -91,30 +94,35 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
         stats[SAMPLES] += n
         if shadows:
             t0 = cycle_count()
-            stats[LIVE] += trace_block_lights(bvh, shadow_lights, rows, n, lifted, geo_n, smooth_n, mag,
-                                              offset_ulps, vis, counters, b, ray, h_t, h_b1, h_b2, prim_r, ia,
-                                              planes, stack)
+            # through its address, so that the packet walk is compiled only
+            # for frames with shadow rays (linked in, every sweep compiled
+            # it: the demo's with --no-shadows 16.6 s against 7.1 now)
+            if not call_native(shadow_entry, (bvh, shadow_lights, rows, np.int64(n), lifted, geo_n, smooth_n,
+                                              mag, offset_ulps, vis, counters, np.int64(b), ray, h_t, h_b1,
+                                              h_b2, prim_r, ia, planes, stack, live)):
+                raise MemoryError("shadow rays of a block failed")
             stats[SHADOW] += cycle_count() - t0
         shade_rows(point, smooth_n, view, albedo, ks, shininess, lights, vis, shadows, ambient, zero, n, rgb,
                    spec_w, cos_h)
         x0, y0 = tile_corner(b, blocks_x, block)
         write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumulate, rgba, z)
+    stats[LIVE] += live[0]
     stats[TOTAL] += cycle_count() - start
 
 
 @parallel_kernel
 def shade_blocks_on_threads(entry, ok, cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts,
                             faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights,
-                            shadow_lights, rows, offset_ulps, shadows, ambient, bg, weight, accumulate, queue, rgba,
-                            z, counters, stats):
+                            shadow_lights, rows, offset_ulps, shadows, shadow_entry, ambient, bg, weight, accumulate,
+                            queue, rgba, z, counters, stats):
     """shade_blocks on each of numba's threads (a row of stats each), called
     through its native entry point (launch.py: nothing linked in, nothing
     optimised twice). ok: a flag a thread, False if its worker failed."""
     for w in prange(stats.shape[0]):
         ok[w] = call_native(entry, (cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off, tri_verts,
                                     faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh, lights,
-                                    shadow_lights, rows, offset_ulps, shadows, ambient, bg, weight, accumulate,
-                                    queue, rgba, z, counters, stats[w]))
+                                    shadow_lights, rows, offset_ulps, shadows, shadow_entry, ambient, bg, weight,
+                                    accumulate, queue, rgba, z, counters, stats[w]))
 
 
 class Sweep(NamedTuple):
@@ -138,10 +146,14 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
     n_workers = numba.get_num_threads()
     stats = np.zeros((n_workers, 4), np.int64)
     queue = new_queue()
+    tree = bvh if shadows else NO_BVH
+    shadow_lights = np.ascontiguousarray(lights[rows, :4])
+    # no shadow rays: the walk is neither called nor compiled
+    entry = block_lights_entry(tree, shadow_lights, rows, counters, lights.shape[0]) if shadows else 0
     args = (cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off, tri_verts,
-            faces, normals, tri_material, materials, uvs, tex_data, tex_info, bvh if shadows else NO_BVH, lights,
-            np.ascontiguousarray(lights[rows, :4]), rows, F32(EPS_OFFSET_ULPS), shadows, F32(ambient), bg,
-            F32(weight), accumulate, queue, rgba, z, counters)
+            faces, normals, tri_material, materials, uvs, tex_data, tex_info, tree, lights, shadow_lights, rows,
+            F32(EPS_OFFSET_ULPS), shadows, np.int64(entry), F32(ambient), bg, F32(weight), accumulate, queue, rgba,
+            z, counters)
     on_omp_threads(shade_blocks_on_threads, shade_blocks, n_workers, *args, per_worker=stats)
     total = stats[:, TOTAL].sum()
     return Sweep(int(stats[:, SAMPLES].sum()), int(stats[:, LIVE].sum()), counters.sum(axis=0),

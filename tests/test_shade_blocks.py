@@ -72,3 +72,23 @@ def test_a_dark_light_is_skipped_and_its_row_stays_dark():
     lit_only, _ = _both({}, lights=lights[[0, 2]])
     np.testing.assert_array_equal(sweep.rgba, lit_only.rgba)
     assert sweep.counters["shadow_rays"] == lit_only.counters["shadow_rays"]
+
+
+def test_a_sweep_without_shadow_rays_loads_no_packet_walk(tmp_path):
+    """The sweep calls the shadow rays' packet walk through its address
+    (bvh_trace.trace_block_lights_into), so a render without shadow rays
+    neither compiles nor loads it; with them, it does."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    demo = Path(__file__).resolve().parents[1] / "anim" / "builtin" / "demo" / "anim.yaml"
+    script = ("import sys; from click.testing import CliRunner; from cli.main import main; "
+              "import raycore.bvh_trace as t; "
+              f"r = CliRunner().invoke(main, ['render', {str(demo)!r}, '-o', sys.argv[1], '--frames', '0:0', "
+              "'--res', '32x24', '-q'] + sys.argv[2:]); assert r.exit_code == 0, r.output; "
+              "print(len(t.trace_block_lights_into.overloads))")
+    root = Path(__file__).resolve().parents[1]
+    loaded = [subprocess.run([sys.executable, "-c", script, str(tmp_path / name), *extra], cwd=root,
+                             capture_output=True, text=True, check=True).stdout.split()[-1]
+              for name, extra in (("plain", ["--no-shadows"]), ("shadowed", []))]
+    assert loaded == ["0", "1"], loaded

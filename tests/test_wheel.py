@@ -100,7 +100,8 @@ def test_a_cold_start_compiles_in_two_processes():
     here, helper = set(run_stats["compiled"]), set(run_stats.get("compiled_by_helper", {}))
     # the sweep (raycore/shade_blocks.py), with the stages it calls compiled
     # inside it (the watch lists top-level compiles), which nothing here compiled
-    surface_half = {"raycore.shade_blocks.shade_blocks"}
+    # and the shadow rays' packet walk, which it calls through its address
+    surface_half = {"raycore.shade_blocks.shade_blocks", "raycore.bvh_trace.trace_block_lights_into"}
     stages = {"raycore.surface.fill_block", "raycore.bvh_trace.trace_block_lights", "raycore.shade.shade_rows",
               "raycore.shade.write_block"}
     assert {"raycore.grid_drivers.trace_primary", "raycore.bvh_build._build_nodes"} <= here
