@@ -212,33 +212,17 @@ def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, 
                                   row, ray, h_t, h_b1, h_b2, prim, ia, planes, stack)
 
 
-_BLOCK_LIGHTS_ENTRIES = {}     # the arguments' array kinds -> address
-
-
-def _kinds(arrays):
-    """What numba types an array by: dtype, dimensions, layout, writability, alignment."""
-    return tuple((a.dtype.str, a.ndim, a.flags.c_contiguous, a.flags.f_contiguous, a.flags.writeable,
-                  a.flags.aligned) for a in arrays)
-
-
 def block_lights_entry(bvh, lights, rows, counters, n_lights) -> int:
     """The address of trace_block_lights_into compiled for the buffers
     shade_blocks.shade_blocks calls it with (GATHER_BLOCK^2 samples, scratch()'s
-    packet buffers, int64 scalars); n_lights: the vis buffer's rows. Kept
-    per kind of argument arrays: numba's typing of the 21 arguments took
-    0.3 ms, once a pass."""
-    key = (type(bvh), _kinds((*bvh, lights, rows, counters)))
-    address = _BLOCK_LIGHTS_ENTRIES.get(key)
-    if address is None:
-        from .launch import native_entry
-        from .surface import GATHER_BLOCK
-        m = GATHER_BLOCK * GATHER_BLOCK
-        rows3 = np.empty((3, m), np.float32)
-        address = native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(0), rows3, rows3, rows3,
-                               np.empty(m, np.float32), np.float32(0), np.empty((n_lights, m), np.float32),
-                               counters, np.int64(0), *scratch.py_func(), np.zeros(1, np.int64))
-        _BLOCK_LIGHTS_ENTRIES[key] = address
-    return address
+    packet buffers, int64 scalars); n_lights: the vis buffer's rows."""
+    from .launch import native_entry
+    from .surface import GATHER_BLOCK
+    m = GATHER_BLOCK * GATHER_BLOCK
+    rows3 = np.empty((3, m), np.float32)
+    return native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(0), rows3, rows3, rows3,
+                        np.empty(m, np.float32), np.float32(0), np.empty((n_lights, m), np.float32), counters,
+                        np.int64(0), *scratch.py_func(), np.zeros(1, np.int64))
 
 
 @kernel
