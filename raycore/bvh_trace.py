@@ -212,17 +212,24 @@ def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, 
                                   row, ray, h_t, h_b1, h_b2, prim, ia, planes, stack)
 
 
-def block_lights_entry(bvh, lights, rows, counters, n_lights) -> int:
+_BLOCK_BUFFERS = []     # stand-ins for shade_blocks' own buffers, made once
+
+
+def block_lights_entry(bvh, lights, rows, counters) -> int:
     """The address of trace_block_lights_into compiled for the buffers
     shade_blocks.shade_blocks calls it with (GATHER_BLOCK^2 samples, scratch()'s
-    packet buffers, int64 scalars); n_lights: the vis buffer's rows."""
+    packet buffers, int64 scalars). Those buffers' stand-ins are made once:
+    only their kinds count (launch.value_kind), not their sizes."""
     from .launch import native_entry
-    from .surface import GATHER_BLOCK
-    m = GATHER_BLOCK * GATHER_BLOCK
-    rows3 = np.empty((3, m), np.float32)
-    return native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(0), rows3, rows3, rows3,
-                        np.empty(m, np.float32), np.float32(0), np.empty((n_lights, m), np.float32), counters,
-                        np.int64(0), *scratch.py_func(), np.zeros(1, np.int64))
+    if not _BLOCK_BUFFERS:
+        from .surface import GATHER_BLOCK
+        m = GATHER_BLOCK * GATHER_BLOCK
+        rows3 = np.empty((3, m), np.float32)
+        _BLOCK_BUFFERS.extend((rows3, np.empty(m, np.float32), np.empty((1, m), np.float32), scratch.py_func(),
+                               np.zeros(1, np.int64)))
+    rows3, mag, vis, packet, live = _BLOCK_BUFFERS
+    return native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(0), rows3, rows3, rows3, mag,
+                        np.float32(0), vis, counters, np.int64(0), *packet, live)
 
 
 @kernel

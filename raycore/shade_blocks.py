@@ -149,7 +149,7 @@ def shade_image(cam, jitter, hits, layout, tri_verts, faces, normals, tri_materi
     tree = bvh if shadows else NO_BVH
     shadow_lights = np.ascontiguousarray(lights[rows, :4])
     # no shadow rays: the walk is neither called nor compiled
-    entry = block_lights_entry(tree, shadow_lights, rows, counters, lights.shape[0]) if shadows else 0
+    entry = block_lights_entry(tree, shadow_lights, rows, counters) if shadows else 0
     args = (cam, F32(jitter[0]), F32(jitter[1]), hits.t, hits.prim, hits.b1, hits.b2, row_off, col_off, tri_verts,
             faces, normals, tri_material, materials, uvs, tex_data, tex_info, tree, lights, shadow_lights, rows,
             F32(EPS_OFFSET_ULPS), shadows, np.int64(entry), F32(ambient), bg, F32(weight), accumulate, queue, rgba,

@@ -111,5 +111,6 @@ def test_the_kept_walk_address_is_the_one_for_the_sweeps_argument_types():
     full = native_entry(trace_block_lights_into, bvh, lights, rows, np.int64(3), *(np.zeros((3, m), np.float32),) * 3,
                         np.zeros(m, np.float32), np.float32(1), np.zeros((3, m), np.float32), counters, np.int64(1),
                         *scratch.py_func(), np.zeros(1, np.int64))
-    assert block_lights_entry(bvh, lights, rows, counters, 2) == full
-    assert block_lights_entry(bvh, lights, rows, counters, 5) == full       # the vis rows are no kind
+    assert block_lights_entry(bvh, lights, rows, counters) == full
+    five = np.zeros((5, 4), np.float32)
+    assert block_lights_entry(bvh, five, np.arange(5, dtype=np.int64), counters) == full
