@@ -24,7 +24,7 @@ try:
 except ImportError:              # see vector_kernel
     CPUTargetOptions = TargetOptions = None
 
-from . import kernel_cache  # noqa: F401  (before any kernel is decorated)
+from . import compile_speed, kernel_cache  # noqa: F401  (before any kernel is decorated)
 
 # OpenMP measured faster than the default workqueue on this machine kind.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
