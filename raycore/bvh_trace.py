@@ -12,7 +12,6 @@ from .bvh_packets import (DX, DY, DZ, F0, F1, INF, N_ROWS, OX, OY, OZ, PACKET, S
 from .camera import primary_dir
 from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .counters import FALLBACK_RAYS, N_COUNTERS, PACKETS
-from .launch import call_native
 from .shadow_rays import directional_light_ray, point_light_ray
 from .thread_pool import on_threads
 from .tile_queue import new_queue, next_tile
@@ -45,20 +44,6 @@ def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, i
     counters[row, PACKETS] += 1
 
 
-@kernel
-def trace_packet_into(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
-                      row):
-    """_trace_packet as a kernel of its own, which the drivers other than the
-    sweep's shadow walk (trace_batch, trace_camera_bvh) call through its
-    machine-code address (launch.call_native, packet_entry): the packet walk
-    is then compiled once for all of them instead of being linked and
-    optimised again into each (trace_camera_bvh compiled in 10.7 s, trace_batch
-    in 5.2 s). Its flags are run-time values here. Every scalar is passed as
-    int64 or bool (np.int64, np.bool_ at the call), the types packet_entry
-    compiles it for."""
-    _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters, row)
-
-
 @helper
 def scratch():
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
@@ -68,14 +53,14 @@ def scratch():
 
 @kernel
 def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, queue, out_t, out_prim,
-                out_b1, out_b2, vis, counters, walk):
+                out_b1, out_b2, vis, counters):
     """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets of
     PACKET consecutive entries, those this thread pulls from `queue` until
     none are left (the wrappers below start one per thread,
     thread_pool.on_threads). Writes the hits (out_*, global triangle ids,
     when out_t is not empty) or the visibility (vis, when not empty: 1 =
     nothing in (t_min, t_max)). mode SINGLE traces every ray alone.
-    counters: one row per packet. walk: trace_packet_into's address (packet_entry)."""
+    counters: one row per packet."""
     n_packets = (n_active + PACKET - 1) // PACKET
     want_hits = out_t.shape[0] > 0
     want_vis = vis.shape[0] > 0
@@ -99,9 +84,8 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
             h_b1[r] = F0
             h_b2[r] = F0
             prim[r] = -1
-        if not call_native(walk, (bvh, ray, h_t, h_b1, h_b2, prim, np.int64(n), np.bool_(any_hit),
-                                  np.bool_(vis_only), np.int64(mode), ia, planes, stack, counters, np.int64(p))):
-            raise MemoryError("a packet walk failed")
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
+                      counters, p)
         for r in range(n):
             i = order[base + r]
             k = prim[r]
@@ -229,19 +213,6 @@ def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, 
 
 
 _BLOCK_BUFFERS = []     # stand-ins for shade_blocks' own buffers, made once
-_PACKET_BUFFERS = []    # stand-ins for scratch()'s packet buffers, made once
-
-
-def packet_entry(bvh, counters) -> int:
-    """The address of trace_packet_into compiled for the scratch() buffers
-    and int64/bool scalars that trace_batch and trace_camera_bvh call it with
-    (only the arguments' kinds count, launch.value_kind)."""
-    from .launch import native_entry
-    if not _PACKET_BUFFERS:
-        _PACKET_BUFFERS.extend(scratch.py_func())
-    ray, h_t, h_b1, h_b2, prim, ia, planes, stack = _PACKET_BUFFERS
-    return native_entry(trace_packet_into, bvh, ray, h_t, h_b1, h_b2, prim, np.int64(0), np.bool_(False),
-                        np.bool_(False), np.int64(0), ia, planes, stack, counters, np.int64(0))
 
 
 def block_lights_entry(bvh, lights, rows, counters) -> int:
@@ -262,11 +233,10 @@ def block_lights_entry(bvh, lights, rows, counters) -> int:
 
 
 @kernel
-def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters, walk):
+def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters):
     """Closest hits of the camera rays (offset jx, jy), row-major: the
     8x8-pixel packets sharing the eye that this thread pulls from `queue`
-    (bvh_trace_camera starts one per thread, thread_pool.on_threads).
-    walk: trace_packet_into's address (packet_entry)."""
+    (bvh_trace_camera starts one per thread, thread_pool.on_threads)."""
     side = 8
     tiles_x = (width + side - 1) // side
     n_tiles = tiles_x * ((height + side - 1) // side)
@@ -292,9 +262,8 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, ou
                 h_b2[n] = F0
                 prim[n] = -1
                 n += 1
-        if not call_native(walk, (bvh, ray, h_t, h_b1, h_b2, prim, np.int64(n), np.bool_(False), np.bool_(False),
-                                  np.int64(SHARED_ORIGIN), ia, planes, stack, counters, np.int64(p))):
-            raise MemoryError("a packet walk failed")
+        _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
+                      counters, p)
         n = 0
         for yy in range(side):
             for xx in range(side):
@@ -331,7 +300,7 @@ def bvh_light_visibility(bvh: Bvh, rays, vis):
     counters = _counters(rays.n_active)
     mode = SHARED_ORIGIN if rays.shared_origin else SHARED_DIRECTION
     on_threads(trace_batch, _workers(), bvh, rays.order, rays.n_active, rays.origin, rays.direction, rays.t_min,
-               rays.t_max, True, mode, new_queue(), *NO_HITS, vis, counters, packet_entry(bvh, counters))
+               rays.t_max, True, mode, new_queue(), *NO_HITS, vis, counters)
     return vis, counters.sum(axis=0)
 
 
@@ -369,7 +338,7 @@ def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=Fals
     counters = _counters(n)
     on_threads(trace_batch, _workers(), bvh, np.arange(n, dtype=np.int32), n, np.ascontiguousarray(origins.T),
                np.ascontiguousarray(dirs.T), t_min, t_max, any_hit, mode, new_queue(), *out, np.zeros(0, np.float32),
-               counters, packet_entry(bvh, counters))
+               counters)
     return (*out, counters.sum(axis=0))
 
 
@@ -381,5 +350,5 @@ def bvh_trace_camera(bvh: Bvh, cam, width, height, jitter=(0.5, 0.5), out=None):
     n_tiles = -(-width // 8) * -(-height // 8)
     counters = np.zeros((n_tiles, N_COUNTERS), np.int64)
     on_threads(trace_camera_bvh, _workers(), bvh, cam, width, height, np.float32(jitter[0]),
-               np.float32(jitter[1]), new_queue(), *out, counters, packet_entry(bvh, counters))
+               np.float32(jitter[1]), new_queue(), *out, counters)
     return (*out, counters.sum(axis=0))
