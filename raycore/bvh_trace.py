@@ -18,7 +18,7 @@ from .tile_queue import new_queue, next_tile
 
 __all__ = ["PACKET", "SHARED_DIRECTION", "SHARED_ORIGIN", "SINGLE", "bvh_light_visibility",
            "bvh_sample_visibility", "bvh_trace_camera", "bvh_trace_rays", "scratch", "trace_batch",
-           "trace_block_lights", "trace_camera_bvh", "trace_light_samples"]
+           "trace_block_lights_into", "trace_camera_bvh", "trace_light_samples"]
 
 
 NO_SKIP = np.zeros(0, np.bool_)
@@ -188,28 +188,18 @@ def trace_light_samples(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_
 
 
 @kernel
-def trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters, row,
-                       ray, h_t, h_b1, h_b2, prim, ia, planes, stack):
-    """trace_light_samples for one block's samples 0..n-1 (buffers of
-    shade_blocks, which stay in cache), on the calling thread, in packets
-    of PACKET; counters row `row`. Returns how many rays were active."""
-    live = 0
-    for base in range(0, n, PACKET):
-        live += _light_packet(bvh, lights, rows, base, min(PACKET, n - base), lifted, geo_n, smooth_n, mag,
-                              offset_ulps, NO_SKIP, vis, counters, row, ray, h_t, h_b1, h_b2, prim, ia, planes,
-                              stack)
-    return live
-
-
-@kernel
 def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters, row,
                             ray, h_t, h_b1, h_b2, prim, ia, planes, stack, live):
-    """trace_block_lights, its active rays added to live[0]: the form the
-    sweep calls through its machine-code address (launch.call_native: no
-    result), so that the packet walk is compiled on its own, and only when
-    a frame has shadow rays, not linked into every sweep."""
-    live[0] += trace_block_lights(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters,
-                                  row, ray, h_t, h_b1, h_b2, prim, ia, planes, stack)
+    """trace_light_samples for one block's samples 0..n-1 (buffers of
+    shade_blocks, which stay in cache), on the calling thread, in packets
+    of PACKET; counters row `row`; the active rays are added to live[0].
+    The sweep calls it through its machine-code address (launch.call_native:
+    no result), so that the packet walk is compiled on its own, and only
+    when a frame has shadow rays, not linked into every sweep."""
+    for base in range(0, n, PACKET):
+        live[0] += _light_packet(bvh, lights, rows, base, min(PACKET, n - base), lifted, geo_n, smooth_n, mag,
+                                 offset_ulps, NO_SKIP, vis, counters, row, ray, h_t, h_b1, h_b2, prim, ia, planes,
+                                 stack)
 
 
 _BLOCK_BUFFERS = []     # stand-ins for shade_blocks' own buffers, made once

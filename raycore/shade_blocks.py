@@ -8,8 +8,9 @@ shade.shade_samples, shade.write_pixels) writes every sample's 26 values
 to memory and reads them back three times: ~270 bytes a sample, ~130 MB
 a frame on hand, at the ~9 GB/s the two cores of this machine kind write.
 Here each stage is the same compiled function that path calls (fill_block,
-bvh_trace.trace_block_lights, shade_rows, write_block), called once a block
-on buffers of the block's size.
+shade_rows, write_block; the shadow rays' bvh_trace.trace_block_lights_into
+shares its packets, _light_packet, with that path's trace_light_samples),
+called once a block on buffers of the block's size.
 
 The frame takes this sweep for a pass whose samples need nothing else:
 shadows through the BVH (or none), every lit light traced for every sample

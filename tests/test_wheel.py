@@ -102,8 +102,7 @@ def test_a_cold_start_compiles_in_two_processes():
     # inside it (the watch lists top-level compiles), which nothing here compiled
     # and the shadow rays' packet walk, which it calls through its address
     surface_half = {"raycore.shade_blocks.shade_blocks", "raycore.bvh_trace.trace_block_lights_into"}
-    stages = {"raycore.surface.fill_block", "raycore.bvh_trace.trace_block_lights", "raycore.shade.shade_rows",
-              "raycore.shade.write_block"}
+    stages = {"raycore.surface.fill_block", "raycore.shade.shade_rows", "raycore.shade.write_block"}
     assert {"raycore.grid_drivers.trace_primary", "raycore.bvh_build._build_nodes"} <= here
     assert surface_half <= helper and not (surface_half | stages) & here, (here, helper)
     assert "raycore.bvh_build._build_nodes" not in helper            # the helper's BVH is made up
