@@ -237,7 +237,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, ou
             break
         x0 = (p % tiles_x) * side
         y0 = (p // tiles_x) * side
-        n = 0
+        n = np.int64(0)             # not a literal 0 (_jit.py: "Literal arguments")
         for yy in range(side):
             for xx in range(side):
                 x = min(x0 + xx, width - 1)

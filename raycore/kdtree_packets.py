@@ -228,7 +228,7 @@ def _packet(cam, px, py, size, width, height, jx, jy, ep, ep_box, fr,
     """Trace the size x size camera packet at (px, py) from node ep (box ep_box)."""
     counters[row, PACKETS] += 1
     o = (cam[0], cam[1], cam[2])
-    n = 0
+    n = np.int64(0)                 # not a literal 0 (_jit.py: "Literal arguments")
     for yy in range(size):
         for xx in range(size):
             d = primary_dir_raw(cam, px + xx, py + yy, jx, jy)

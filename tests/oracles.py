@@ -3,12 +3,15 @@ import numpy as np
 from numba import njit, prange
 
 from raycore.camera import primary_dir
-from raycore.triangle import intersect_ray
+from raycore.triangle import intersect_ray, ray_axes, woop_test
 
 
 @njit(parallel=True, cache=True)
-def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
-    """Closest hit of every ray against every triangle: (t, prim, b1, b2)."""
+def brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tri_verts):
+    """Closest hit of every ray against every triangle: (t, prim, b1, b2).
+    The plainest form (a ray, then every triangle in order through the
+    renderer's intersect_ray): the reference brute_force_closest is checked
+    against (tests/test_triangle.py)."""
     n = origins.shape[0]
     out_t = np.full(n, np.inf, np.float32)
     out_prim = np.full(n, -1, np.int32)
@@ -26,6 +29,76 @@ def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
                 out_b1[i] = b1
                 out_b2[i] = b2
         out_t[i] = best if out_prim[i] >= 0 else np.inf
+    return out_t, out_prim, out_b1, out_b2
+
+
+# rays a thread takes at once in brute_force_closest
+RAY_CHUNK = 64
+
+
+@njit(inline="always")
+def _axis(k, x, y, z):
+    """Component k of (x, y, z), by selects (a loop over rays calling it vectorizes)."""
+    return x if k == 0 else (y if k == 1 else z)
+
+
+@njit(parallel=True, cache=True)
+def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
+    """Closest hit of every ray against every triangle: (t, prim, b1, b2),
+    exactly brute_force_closest_one_by_one's, ~10x faster: the same
+    arithmetic (each ray's shear axes as intersect_ray chooses them, the
+    vertices minus the origin, woop_test, a hit only when t_min < t < the
+    closest so far, triangles in order), with the loops swapped, every
+    triangle against a chunk of RAY_CHUNK rays, so that the loop over the
+    rays vectorizes."""
+    n = origins.shape[0]
+    out_t = np.full(n, np.inf, np.float32)
+    out_prim = np.full(n, -1, np.int32)
+    out_b1 = np.zeros(n, np.float32)
+    out_b2 = np.zeros(n, np.float32)
+    for c in prange((n + RAY_CHUNK - 1) // RAY_CHUNK):
+        s = c * RAY_CHUNK
+        m = min(n, s + RAY_CHUNK) - s
+        kx = np.empty(RAY_CHUNK, np.int64)
+        ky = np.empty(RAY_CHUNK, np.int64)
+        kz = np.empty(RAY_CHUNK, np.int64)
+        ray = np.empty((7, RAY_CHUNK), np.float32)       # shear x, y, z, origin x, y, z, t_min
+        best = np.empty(RAY_CHUNK, np.float32)
+        prim = np.full(RAY_CHUNK, -1, np.int32)
+        best_b1 = np.zeros(RAY_CHUNK, np.float32)
+        best_b2 = np.zeros(RAY_CHUNK, np.float32)
+        for r in range(m):
+            i = s + r
+            d = (dirs[i, 0], dirs[i, 1], dirs[i, 2])
+            a, b, k = ray_axes(d[0], d[1], d[2])
+            kx[r], ky[r], kz[r] = a, b, k
+            sz = np.float32(1.0) / d[k]
+            ray[0, r], ray[1, r], ray[2, r] = d[a] * sz, d[b] * sz, sz
+            ray[3, r], ray[4, r], ray[5, r] = origins[i, 0], origins[i, 1], origins[i, 2]
+            ray[6, r] = t_min[i]
+            best[r] = t_max[i]
+        for tri in range(tri_verts.shape[0]):
+            v = (tri_verts[tri, 0], tri_verts[tri, 1], tri_verts[tri, 2], tri_verts[tri, 3], tri_verts[tri, 4],
+                 tri_verts[tri, 5], tri_verts[tri, 6], tri_verts[tri, 7], tri_verts[tri, 8])
+            for r in range(m):
+                ax, ay, az = v[0] - ray[3, r], v[1] - ray[4, r], v[2] - ray[5, r]
+                bx, by, bz = v[3] - ray[3, r], v[4] - ray[4, r], v[5] - ray[5, r]
+                cx, cy, cz = v[6] - ray[3, r], v[7] - ray[4, r], v[8] - ray[5, r]
+                a, b, k = kx[r], ky[r], kz[r]
+                hit, t, b1, b2 = woop_test(_axis(a, ax, ay, az), _axis(b, ax, ay, az), _axis(k, ax, ay, az),
+                                           _axis(a, bx, by, bz), _axis(b, bx, by, bz), _axis(k, bx, by, bz),
+                                           _axis(a, cx, cy, cz), _axis(b, cx, cy, cz), _axis(k, cx, cy, cz),
+                                           ray[0, r], ray[1, r], ray[2, r])
+                hit = hit & (t > ray[6, r]) & (t < best[r])
+                best[r] = t if hit else best[r]
+                prim[r] = tri if hit else prim[r]
+                best_b1[r] = b1 if hit else best_b1[r]
+                best_b2[r] = b2 if hit else best_b2[r]
+        for r in range(m):
+            out_prim[s + r] = prim[r]
+            out_b1[s + r] = best_b1[r]
+            out_b2[s + r] = best_b2[r]
+            out_t[s + r] = best[r] if prim[r] >= 0 else np.inf
     return out_t, out_prim, out_b1, out_b2
 
 
