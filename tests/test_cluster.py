@@ -35,7 +35,7 @@ def run(*args, timeout=300, env=None):
 
 
 # the connect timeout shortened from 10 s (the tests wait for it to pass)
-SHORT_CONNECT = {**os.environ, "FRUSTRACE_CONNECT_TIMEOUT_S": "4"}
+SHORT_CONNECT = {**os.environ, "FRUSTRACE_CONNECT_TIMEOUT_S": "3"}
 
 
 def frames_in(d: Path):
@@ -334,14 +334,14 @@ def test_a_scheduler_without_workers_is_one_line_after_the_wait(tmp_path):
         deadline = time.monotonic() + 60
         while not (tmp_path / "s.json").exists() and time.monotonic() < deadline:
             time.sleep(0.1)
-        env = {**os.environ, "FRUSTRACE_WORKER_WAIT_S": "3"}
+        env = {**os.environ, "FRUSTRACE_WORKER_WAIT_S": "1"}
         proc = frustrace("render", DEMO, "-o", tmp_path / "x", "--scheduler", tmp_path / "s.json", *ARGS, env=env)
         out, err = proc.communicate(timeout=120)
     finally:
         sched.kill()
         sched.wait(timeout=30)
     lines = (out + err).strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1 and "has no workers" in lines[0] and "waited 3 s" in lines[0], err
+    assert proc.returncode == 2 and len(lines) == 1 and "has no workers" in lines[0] and "waited 1 s" in lines[0], err
 
 
 def test_ctrl_c_to_the_whole_process_group_prints_one_line(tmp_path):
