@@ -1,12 +1,12 @@
 """Slow, obviously correct references for the fast kernels."""
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from raycore.camera import primary_dir
 from raycore.triangle import intersect_ray, ray_axes, woop_test
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, error_model="numpy")
 def brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tri_verts):
     """Closest hit of every ray against every triangle: (t, prim, b1, b2).
     The plainest form (a ray, then every triangle in order through the
@@ -17,7 +17,7 @@ def brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tri_verts):
     out_prim = np.full(n, -1, np.int32)
     out_b1 = np.zeros(n, np.float32)
     out_b2 = np.zeros(n, np.float32)
-    for i in prange(n):
+    for i in range(n):
         best = t_max[i]
         for tri in range(tri_verts.shape[0]):
             hit, t, b1, b2 = intersect_ray(origins[i, 0], origins[i, 1], origins[i, 2],
@@ -42,21 +42,22 @@ def _axis(k, x, y, z):
     return x if k == 0 else (y if k == 1 else z)
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, error_model="numpy")
 def brute_force_closest(origins, dirs, t_min, t_max, tri_verts):
     """Closest hit of every ray against every triangle: (t, prim, b1, b2),
-    exactly brute_force_closest_one_by_one's, ~10x faster: the same
+    exactly brute_force_closest_one_by_one's, ~5x faster: the same
     arithmetic (each ray's shear axes as intersect_ray chooses them, the
     vertices minus the origin, woop_test, a hit only when t_min < t < the
     closest so far, triangles in order), with the loops swapped, every
     triangle against a chunk of RAY_CHUNK rays, so that the loop over the
-    rays vectorizes."""
+    rays vectorizes. On one thread: the suite keeps every core busy anyway,
+    and a parallel loop here compiled in 4.3 s instead of 1.6."""
     n = origins.shape[0]
     out_t = np.full(n, np.inf, np.float32)
     out_prim = np.full(n, -1, np.int32)
     out_b1 = np.zeros(n, np.float32)
     out_b2 = np.zeros(n, np.float32)
-    for c in prange((n + RAY_CHUNK - 1) // RAY_CHUNK):
+    for c in range((n + RAY_CHUNK - 1) // RAY_CHUNK):
         s = c * RAY_CHUNK
         m = min(n, s + RAY_CHUNK) - s
         kx = np.empty(RAY_CHUNK, np.int64)
