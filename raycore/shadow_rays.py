@@ -32,11 +32,12 @@ large far from it.
 """
 import numba
 import numpy as np
-from numba import prange
 
-from ._jit import helper, parallel_arith_kernel, parallel_kernel
+from ._jit import helper, kernel, vector_kernel
 from .config import EPS_OFFSET_ULPS, SHADOW_T_MIN_FRACTION
 from .grid_cgt import F0, F1, INF
+from .thread_pool import on_threads
+from .tile_queue import new_queue, next_tile
 from .workspace import scratch
 
 ULP = np.float32(2.0 ** -24)
@@ -51,6 +52,8 @@ SHADOW_PACKET = 32
 # 2026-12-03); 2^0-2^4 were no better
 ORDER_BITS = 5
 N_FACES = 6
+# samples a thread takes at once in light_rays
+RAY_CHUNK = 16384
 
 
 @helper
@@ -85,62 +88,75 @@ def directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
             lifted[2, i] + geo_n[2, i] * off, INF if facing else -F1)
 
 
-@parallel_arith_kernel
+@vector_kernel
 def light_rays(kind, lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
-               ray_o, ray_d, t_min, t_max, face, key_s, key_t):
+               ray_o, ray_d, t_min, t_max, face, key_s, key_t, queue):
     """Shadow ray of every surface sample to one light (kind 0: point at
-    (lx, ly, lz); 1: directional, travelling along the unit (lx, ly, lz)).
-    Inactive (t_max = -1) where the smooth normal faces away from the light.
-    face / key_s / key_t: the light-space coordinates the packets are sorted by.
+    (lx, ly, lz); 1: directional, travelling along the unit (lx, ly, lz)),
+    for the chunks of RAY_CHUNK samples this thread pulls from `queue`
+    (LightRays starts one per thread, thread_pool.on_threads). Inactive
+    (t_max = -1) where the smooth normal faces away from the light. face /
+    key_s / key_t: the light-space coordinates the packets are sorted by.
     One branch-free loop per kind, so that each vectorizes (one loop testing
-    the kind per sample did not: 6.3 ms a light on hand at 1024^2)."""
+    the kind per sample did not: 6.3 ms a light on hand at 1024^2); the
+    arrays are distinct (vector_kernel: noalias)."""
     n = mag.shape[0]
-    if kind == 0:
-        light_mag = max(abs(lx), abs(ly), abs(lz))
-        for i in prange(n):
-            dx, dy, dz, dist, t_far = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
-                                                      offset_ulps, i)
-            ray_o[0, i] = lx
-            ray_o[1, i] = ly
-            ray_o[2, i] = lz
-            ray_d[0, i] = dx
-            ray_d[1, i] = dy
-            ray_d[2, i] = dz
-            t_min[i] = dist * SHADOW_T_MIN_FRACTION
-            t_max[i] = t_far
-            # cube-map face of the direction and its two coordinates on it
-            ax, ay, az = abs(dx), abs(dy), abs(dz)
-            x_major = (ax >= ay) & (ax >= az)
-            y_major = (~x_major) & (ay >= az)
-            f = np.int32(0 if dx > F0 else 1) if x_major else (
-                np.int32(2 if dy > F0 else 3) if y_major else np.int32(4 if dz > F0 else 5))
-            s = dy if x_major else (dz if y_major else dx)
-            t = dz if x_major else (dx if y_major else dy)
-            big = ax if x_major else (ay if y_major else az)
-            inv_big = F1 / big if big > F0 else F0
-            face[i] = f
-            key_s[i] = s * inv_big
-            key_t[i] = t * inv_big
+    n_chunks = (n + RAY_CHUNK - 1) // RAY_CHUNK
+    light_mag = max(abs(lx), abs(ly), abs(lz))
+    # coordinates in the plane normal to a directional light (any fixed basis)
+    if abs(lx) < np.float32(0.6):
+        ux, uy, uz = F0, lz, -ly          # (1, 0, 0) x l
     else:
-        # coordinates in the plane normal to the light (any fixed basis)
-        if abs(lx) < np.float32(0.6):
-            ux, uy, uz = F0, lz, -ly          # (1, 0, 0) x l
+        ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
+    vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
+    while True:
+        c = next_tile(queue, n_chunks)
+        if c < 0:
+            break
+        i0 = c * RAY_CHUNK
+        i1 = min(n, i0 + RAY_CHUNK)
+        if kind == 0:
+            for k in range(i0, i1):
+                i = np.uint64(k)          # unsigned: no negative-index wraparound, the loop vectorizes
+                dx, dy, dz, dist, t_far = point_light_ray(lx, ly, lz, light_mag, lifted, geo_n, smooth_n, mag,
+                                                          offset_ulps, i)
+                ray_o[0, i] = lx
+                ray_o[1, i] = ly
+                ray_o[2, i] = lz
+                ray_d[0, i] = dx
+                ray_d[1, i] = dy
+                ray_d[2, i] = dz
+                t_min[i] = dist * SHADOW_T_MIN_FRACTION
+                t_max[i] = t_far
+                # cube-map face of the direction and its two coordinates on it
+                ax, ay, az = abs(dx), abs(dy), abs(dz)
+                x_major = (ax >= ay) & (ax >= az)
+                y_major = (~x_major) & (ay >= az)
+                f = np.int32(0 if dx > F0 else 1) if x_major else (
+                    np.int32(2 if dy > F0 else 3) if y_major else np.int32(4 if dz > F0 else 5))
+                s = dy if x_major else (dz if y_major else dx)
+                t = dz if x_major else (dx if y_major else dy)
+                big = ax if x_major else (ay if y_major else az)
+                inv_big = F1 / big if big > F0 else F0
+                face[i] = f
+                key_s[i] = s * inv_big
+                key_t[i] = t * inv_big
         else:
-            ux, uy, uz = -lz, F0, lx          # (0, 1, 0) x l
-        vx, vy, vz = ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux
-        for i in prange(n):
-            ox, oy, oz, t_far = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps, i)
-            ray_o[0, i] = ox
-            ray_o[1, i] = oy
-            ray_o[2, i] = oz
-            ray_d[0, i] = -lx
-            ray_d[1, i] = -ly
-            ray_d[2, i] = -lz
-            t_min[i] = F0
-            t_max[i] = t_far
-            face[i] = 0
-            key_s[i] = ox * ux + oy * uy + oz * uz
-            key_t[i] = ox * vx + oy * vy + oz * vz
+            for k in range(i0, i1):
+                i = np.uint64(k)
+                ox, oy, oz, t_far = directional_light_ray(lx, ly, lz, lifted, geo_n, smooth_n, mag, offset_ulps,
+                                                          i)
+                ray_o[0, i] = ox
+                ray_o[1, i] = oy
+                ray_o[2, i] = oz
+                ray_d[0, i] = -lx
+                ray_d[1, i] = -ly
+                ray_d[2, i] = -lz
+                t_min[i] = F0
+                t_max[i] = t_far
+                face[i] = 0
+                key_s[i] = ox * ux + oy * uy + oz * uz
+                key_t[i] = ox * vx + oy * vy + oz * vz
 
 
 @helper
@@ -154,7 +170,6 @@ def _spread(v):
     return v
 
 
-@parallel_kernel
 def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key, order):
     """Active rays (t_max > 0) in order of (face, Morton cell); returns how
     many. A counting sort: one histogram per chunk, then each chunk scatters
@@ -163,58 +178,91 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key,
     that square, and the pass that finds the keys' range is skipped (a
     scene that fills a small part of a face then falls into fewer cells,
     which measured as fast: 1-1.5 ms a light saved on hand and toys);
-    else the cells divide the range the keys cover, per face."""
+    else the cells divide the range the keys cover, per face.
+
+    The chunks' passes (key range; keys and histogram; scatter) run on the
+    threads (thread_pool.on_threads), each a plain kernel: as one numba
+    parallel kernel of three parallel loops the sort compiled in ~3 s."""
     n = t_max.shape[0]
-    cells = 1 << (2 * bits)
-    n_buckets = N_FACES * cells
-    # three parallel loops (bounds; keys and histogram; scatter): each costs
-    # ~1.5 s of first compile, and so does every np.full / np.zeros here,
-    # which numba turns into one, so the arrays are filled by plain loops
+    threads = max(1, min(numba.get_num_threads(), n_chunks))
     lo = np.empty((n_chunks, N_FACES, 2), np.float32)
     hi = np.empty((n_chunks, N_FACES, 2), np.float32)
     if not unit_keys:
-        for c in prange(n_chunks):
-            # per face range of the keys, thread-local: the chunks' rows of lo/hi share cache lines
-            my_lo = np.empty((N_FACES, 2), np.float32)
-            my_hi = np.empty((N_FACES, 2), np.float32)
-            for f in range(N_FACES):
-                for a in range(2):
-                    my_lo[f, a] = INF
-                    my_hi[f, a] = -INF
-            for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
-                if t_max[i] > F0:
-                    f = face[i]
-                    my_lo[f, 0] = min(my_lo[f, 0], key_s[i])
-                    my_hi[f, 0] = max(my_hi[f, 0], key_s[i])
-                    my_lo[f, 1] = min(my_lo[f, 1], key_t[i])
-                    my_hi[f, 1] = max(my_hi[f, 1], key_t[i])
-            for f in range(N_FACES):
-                for a in range(2):
-                    lo[c, f, a] = my_lo[f, a]
-                    hi[c, f, a] = my_hi[f, a]
+        on_threads(_key_ranges, threads, t_max, face, key_s, key_t, n_chunks, new_queue(), lo, hi)
     f_lo = np.empty((N_FACES, 2), np.float32)
     f_scale = np.empty((N_FACES, 2), np.float32)
+    _face_scales(lo, hi, bool(unit_keys), bits, f_lo, f_scale)
+    hist = np.empty((n_chunks, N_FACES << (2 * bits)), np.int32)
+    on_threads(_keys_and_counts, threads, t_max, face, key_s, key_t, f_lo, f_scale, bits, n_chunks, new_queue(),
+               key, hist)
+    total = _prefix(hist)
+    on_threads(_scatter, threads, key, n_chunks, new_queue(), hist, order)
+    return total
+
+
+@kernel
+def _key_ranges(t_max, face, key_s, key_t, n_chunks, queue, lo, hi):
+    """Per face, the range of the active rays' keys in each chunk this
+    thread pulls (lo, hi (n_chunks, N_FACES, 2)), in thread-local rows
+    first: the chunks' rows of lo/hi share cache lines."""
+    n = t_max.shape[0]
+    my_lo = np.empty((N_FACES, 2), np.float32)
+    my_hi = np.empty((N_FACES, 2), np.float32)
+    while True:
+        c = next_tile(queue, n_chunks)
+        if c < 0:
+            break
+        for f in range(N_FACES):
+            for a in range(2):
+                my_lo[f, a] = INF
+                my_hi[f, a] = -INF
+        for i in range(np.uint64(c * n // n_chunks), np.uint64((c + 1) * n // n_chunks)):
+            if t_max[i] > F0:
+                f = face[i]
+                my_lo[f, 0] = min(my_lo[f, 0], key_s[i])
+                my_hi[f, 0] = max(my_hi[f, 0], key_s[i])
+                my_lo[f, 1] = min(my_lo[f, 1], key_t[i])
+                my_hi[f, 1] = max(my_hi[f, 1], key_t[i])
+        for f in range(N_FACES):
+            for a in range(2):
+                lo[c, f, a] = my_lo[f, a]
+                hi[c, f, a] = my_hi[f, a]
+
+
+@kernel
+def _face_scales(lo, hi, unit_keys, bits, f_lo, f_scale):
+    """Each face's key origin and cells per unit: over [-1, 1] for unit
+    keys, else over the range the chunks' keys cover."""
     top = np.float32((1 << bits) - 1)
-    top_i = np.int32((1 << bits) - 1)
     for f in range(N_FACES):
         for a in range(2):
             if unit_keys:
                 mn, mx = -F1, F1
             else:
                 mn, mx = INF, -INF
-                for c in range(n_chunks):
+                for c in range(lo.shape[0]):
                     mn = min(mn, lo[c, f, a])
                     mx = max(mx, hi[c, f, a])
             f_lo[f, a] = mn
             f_scale[f, a] = top / (mx - mn) if mx > mn else F0
-    # per chunk: keys in a branch-free loop (-1: inactive), then its row of
-    # the histogram (one loop doing both measured 3.3 ms against 1.8 + 0.5
-    # on hand at 1024^2)
-    hist = np.empty((n_chunks, n_buckets), np.int32)
-    for c in prange(n_chunks):
-        for b in range(n_buckets):
+
+
+@vector_kernel
+def _keys_and_counts(t_max, face, key_s, key_t, f_lo, f_scale, bits, n_chunks, queue, key, hist):
+    """Per chunk this thread pulls: keys in a branch-free loop (-1:
+    inactive), then its row of the histogram (one loop doing both measured
+    3.3 ms against 1.8 + 0.5 on hand at 1024^2); distinct arrays
+    (vector_kernel: noalias), so that the keys' loop vectorizes."""
+    n = t_max.shape[0]
+    cells = 1 << (2 * bits)
+    top_i = np.int32((1 << bits) - 1)
+    while True:
+        c = next_tile(queue, n_chunks)
+        if c < 0:
+            break
+        for b in range(hist.shape[1]):
             hist[c, b] = 0
-        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+        for i in range(np.uint64(c * n // n_chunks), np.uint64((c + 1) * n // n_chunks)):
             f = face[i]
             # clamped: a unit key rounded past 1 (or a key outside the range
             # for any reason) must not index past its face's cells
@@ -222,25 +270,39 @@ def light_space_order(t_max, face, key_s, key_t, bits, n_chunks, unit_keys, key,
             cv = min(max(np.int32((key_t[i] - f_lo[f, 1]) * f_scale[f, 1]), np.int32(0)), top_i)
             k = np.int32(f * cells) + (_spread(cu) | (_spread(cv) << 1))
             key[i] = k if t_max[i] > F0 else np.int32(-1)
-        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+        for i in range(np.uint64(c * n // n_chunks), np.uint64((c + 1) * n // n_chunks)):
             k = key[i]
             if k >= 0:
                 hist[c, k] += 1
-    # exclusive prefix in (bucket, chunk) order: chunk c's rays of bucket k
-    # follow chunk c-1's, which keeps input order within a bucket
+
+
+@kernel
+def _prefix(hist):
+    """Exclusive prefix in (bucket, chunk) order, in place: chunk c's rays
+    of bucket k follow chunk c-1's, which keeps input order within a
+    bucket. Returns the total."""
     total = 0
-    for k in range(n_buckets):
-        for c in range(n_chunks):
+    for k in range(hist.shape[1]):
+        for c in range(hist.shape[0]):
             count = hist[c, k]
             hist[c, k] = total
             total += count
-    for c in prange(n_chunks):
-        for i in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+    return total
+
+
+@kernel
+def _scatter(key, n_chunks, queue, hist, order):
+    """Each active ray of the chunks this thread pulls to its place in order."""
+    n = key.shape[0]
+    while True:
+        c = next_tile(queue, n_chunks)
+        if c < 0:
+            break
+        for i in range(np.uint64(c * n // n_chunks), np.uint64((c + 1) * n // n_chunks)):
             k = key[i]
             if k >= 0:
                 order[hist[c, k]] = i
                 hist[c, k] += 1
-    return total
 
 
 class LightRays:
@@ -269,9 +331,9 @@ class LightRays:
         key_t = take("key_t", n)
         lx, ly, lz = (f32(c) for c in light_vec)
         chunks = max(1, numba.get_num_threads())
-        light_rays(self.kind, lx, ly, lz, surface.lifted, surface.geo_n, surface.smooth_n,
-                   surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction, self.t_min,
-                   self.t_max, face, key_s, key_t)
+        on_threads(light_rays, max(1, min(chunks, -(-n // RAY_CHUNK))), self.kind, lx, ly, lz, surface.lifted,
+                   surface.geo_n, surface.smooth_n, surface.mag, f32(EPS_OFFSET_ULPS), self.origin, self.direction,
+                   self.t_min, self.t_max, face, key_s, key_t, new_queue())
         if skip is not None:
             self.t_max[skip] = -1.0
         self.order = take("order", n, np.int32)
