@@ -25,11 +25,10 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from numba import prange
-
-from ._jit import helper, parallel_arith_kernel, parallel_kernel, vector_kernel
+from ._jit import helper, kernel, vector_kernel
 from .camera import primary_dir
-from .tile_queue import tile_corner, tile_count
+from .thread_pool import on_threads
+from .tile_queue import new_queue, next_tile, tile_corner, tile_count
 from .triangle import surface_point
 from .workspace import scratch
 
@@ -96,14 +95,18 @@ def sample_texture(tex_data, tex_info, tex, u, v):
     return r, g, b
 
 
-@parallel_arith_kernel
-def count_hits(hit_prim, row_off, col_off, block, block_count):
+@kernel
+def count_hits(hit_prim, row_off, col_off, block, block_count, queue):
     """Visible samples per block of block x block pixels (block_count (n_blocks,)
-    i64, blocks row-major)."""
+    i64, blocks row-major), for the blocks this thread pulls from `queue`
+    (visible_surface starts one per thread, thread_pool.on_threads)."""
     width = col_off.shape[0]
     height = row_off.shape[0]
     blocks_x, _ = tile_count(width, height, block)
-    for b in prange(block_count.shape[0]):
+    while True:
+        b = next_tile(queue, block_count.shape[0])
+        if b < 0:
+            break
         x0, y0 = tile_corner(b, blocks_x, block)
         c = 0
         for y in range(y0, min(y0 + block, height)):
@@ -233,26 +236,29 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
     return start + n
 
 
-@parallel_kernel
+@kernel
 def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block, block_start,
                  tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
                  pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess,
-                 hit_t, n_threads):
+                 hit_t, queue):
     """Fill the Surface rows of the visible samples, block by block of
     block x block pixels (block b's samples start at block_start[b]): the
     order the camera packets wrote their hits in, so that the hits are read
     a cache line at a time (rows of the whole image read 32 of a packet's
-    values and jumped: 10.5 against 9.6 ms on hand at 1024^2)."""
+    values and jumped: 10.5 against 9.6 ms on hand at 1024^2). The blocks
+    this thread pulls from `queue` (visible_surface starts one per thread,
+    thread_pool.on_threads; the visible surface is rarely spread evenly
+    over the image). As a numba parallel loop it compiled in ~1.8 s more."""
     blocks_x, n_blocks = tile_count(col_off.shape[0], row_off.shape[0], block)
-    # blocks dealt out in turn: prange splits statically, and the visible
-    # surface is rarely spread evenly over the image's halves
-    for t in prange(n_threads):
-        found = np.empty((3, block * block), np.int64)
-        for b in range(t, n_blocks, n_threads):
-            fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, block, b, blocks_x,
-                       tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
-                       block_start[b], found, pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag,
-                       albedo, ks, shininess)
+    found = np.empty((3, block * block), np.int64)
+    while True:
+        b = next_tile(queue, n_blocks)
+        if b < 0:
+            break
+        fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, block, b, blocks_x,
+                   tri_verts, faces, normals, tri_material, materials, uvs, tex_data, tex_info,
+                   block_start[b], found, pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag,
+                   albedo, ks, shininess)
 
 
 def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
@@ -266,7 +272,8 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
     width = col_off.shape[0]
     _, n_blocks = tile_count(width, height, GATHER_BLOCK)
     block_count = np.empty(n_blocks, np.int64)
-    count_hits(hit_prim, row_off, col_off, GATHER_BLOCK, block_count)
+    threads = numba.get_num_threads()
+    on_threads(count_hits, threads, hit_prim, row_off, col_off, GATHER_BLOCK, block_count, new_queue())
     block_start = np.zeros(n_blocks + 1, np.int64)
     np.cumsum(block_count, out=block_start[1:])
     n = int(block_start[-1])
@@ -279,7 +286,7 @@ def visible_surface(cam, jitter, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_o
     s = Surface(*(take(name, (n,) if name in ("pixel", "prim", "depth", "mag", "ks", "shininess")
                        else (3, n), np.int32 if name in ("pixel", "prim") else f32)
                   for name in Surface._fields))
-    fill_surface(cam, f32(jitter[0]), f32(jitter[1]), hit_prim, hit_b1, hit_b2, row_off, col_off,
-                 GATHER_BLOCK, block_start, tri_verts, faces, normals, tri_material, materials, uvs, tex_data,
-                 tex_info, *s, hit_t, numba.get_num_threads())
+    on_threads(fill_surface, threads, cam, f32(jitter[0]), f32(jitter[1]), hit_prim, hit_b1, hit_b2, row_off,
+               col_off, GATHER_BLOCK, block_start, tri_verts, faces, normals, tri_material, materials, uvs,
+               tex_data, tex_info, *s, hit_t, new_queue())
     return s
