@@ -8,6 +8,7 @@ the AOV writes when none are asked for.
 import time
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from .accelerators import KD_PACKET, BvhAccel, GridAccel, KdAccel
@@ -23,6 +24,8 @@ from .shade_blocks import shade_image
 from .shadow_rays import LightRays
 from .shutter_lens import budget_times_lens, plain_times_lens
 from .surface import Surface, visible_surface
+from .thread_pool import on_threads
+from .tile_queue import new_queue
 from .trace import camera_buffers, row_major_offsets
 from .workspace import Workspace
 
@@ -310,8 +313,9 @@ def render_frame(geom: Geometry, shading: Shading, pose: CameraPose, cfg: Render
         timings["shadow_ms"] += (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         rgb = buffers.work.take("rgb", (3, n_vis), capacity=3 * W * H)
-        shade_samples(surface.point, surface.smooth_n, surface.view, surface.albedo, surface.ks,
-                      surface.shininess, shading.lights, vis, cast_shadows, np.float32(cfg.ambient), rgb)
+        on_threads(shade_samples, numba.get_num_threads(), surface.point, surface.smooth_n, surface.view,
+                   surface.albedo, surface.ks, surface.shininess, shading.lights, vis, cast_shadows,
+                   np.float32(cfg.ambient), rgb, new_queue())
         if aovs is not None and aov:
             aovs.add(surface)
         timings["shade_ms"] += (time.perf_counter() - t0) * 1e3

@@ -15,8 +15,9 @@ written by one scatter at the end.
 import numpy as np
 from numba import prange
 
-from ._jit import arith_kernel, helper, parallel_arith_kernel, parallel_kernel
+from ._jit import arith_kernel, helper, kernel, parallel_arith_kernel
 from .fast_pow import pow_unit
+from .tile_queue import next_tile
 
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
@@ -88,11 +89,13 @@ def shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis,
             b_out[k] += cb * spec
 
 
-@parallel_kernel
+@kernel
 def shade_samples(point, normal, view, albedo, ks, shininess, lights, vis, use_vis, ambient,
-                  out_rgb):
-    """Colour (3, n) of every surface sample. vis (n_light, n) is read only
-    when use_vis (1 lit, 0 shadowed).
+                  out_rgb, queue):
+    """Colour (3, n) of every surface sample, for the chunks of CHUNK samples
+    this thread pulls from `queue` (frame.py starts one per thread,
+    thread_pool.on_threads; as a numba parallel loop it compiled ~1.5 s
+    longer). vis (n_light, n) is read only when use_vis (1 lit, 0 shadowed).
 
     Per light, a branch-free loop over the samples (vectorized) adds the
     diffuse term and keeps each sample's specular weight and cos(n, h); a
@@ -100,11 +103,14 @@ def shade_samples(point, normal, view, albedo, ks, shininess, lights, vis, use_v
     the first loop kept all of it from vectorizing: 8 ms -> 4 ms on the hand
     scene), with fast_pow.pow_unit, which vectorizes too (4.8 -> ~2 ms)."""
     n = point.shape[1]
-    for c in prange((n + CHUNK - 1) // CHUNK):
+    spec_w = np.empty(CHUNK, np.float32)
+    cos_h = np.empty(CHUNK, np.float32)
+    while True:
+        c = next_tile(queue, (n + CHUNK - 1) // CHUNK)
+        if c < 0:
+            break
         i0 = c * CHUNK
         i1 = min(n, i0 + CHUNK)
-        spec_w = np.empty(i1 - i0, np.float32)
-        cos_h = np.empty(i1 - i0, np.float32)
         shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis, ambient, i0, i1,
                    out_rgb, spec_w, cos_h)
 
