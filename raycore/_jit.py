@@ -40,12 +40,6 @@ numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 if "OMP_WAIT_POLICY" not in os.environ:
     os.environ.setdefault("GOMP_SPINCOUNT", "10000")
 
-# Literal arguments: a kernel that calls another kernel with a counter
-# started at a constant (`n = 0`, then `n += 1` in a loop) has the call typed
-# twice, first with n as the literal 0 (before the loop's n += 1 is typed),
-# then as int64, and numba compiles the callee for both: the BVH's camera
-# packets compiled their packet walk twice (9.1 s, 4.6 of them for the
-# literal version, never run). Such counters start as np.int64(0).
 SAFE_FASTMATH = {"arcp", "nsz"}
 ARITH_FASTMATH = {"contract", "arcp", "nsz"}   # for kernels without edge tests
 # numba gives every compiled function a C-callable twin (its "cfunc
@@ -79,6 +73,13 @@ parallel_kernel = jit(cache=True, nogil=True, parallel=True, error_model="numpy"
 arith_kernel = jit(cache=True, nogil=True, error_model="numpy", fastmath=ARITH_FASTMATH)
 parallel_arith_kernel = jit(cache=True, nogil=True, parallel=True, error_model="numpy",
                             fastmath=ARITH_FASTMATH)
+
+# Literal arguments: a kernel that calls another kernel with a counter
+# started at a constant (`n = 0`, then `n += 1` in a loop) has the call typed
+# twice, first with n as the literal 0 (before the loop's n += 1 is typed),
+# then as int64, and numba compiles the callee for both: the BVH's camera
+# packets compiled their packet walk twice (9.1 s, 4.6 of them for the
+# literal version, never run). Such counters start as np.int64(0).
 
 
 @intrinsic

@@ -25,6 +25,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+
 from ._jit import helper, kernel, vector_kernel
 from .camera import primary_dir
 from .thread_pool import on_threads

@@ -32,7 +32,7 @@ def brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tri_verts):
     return out_t, out_prim, out_b1, out_b2
 
 
-# rays a thread takes at once in brute_force_closest
+# rays brute_force_closest tests each triangle against at once
 RAY_CHUNK = 64
 
 

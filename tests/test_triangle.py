@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from conftest import icosphere_mesh, tri_verts_of
-from oracles import brute_force_closest, brute_force_closest_one_by_one
+from oracles import RAY_CHUNK, brute_force_closest, brute_force_closest_one_by_one
 from raycore.grid_build import build_grid
 from raycore.trace import trace_rays
 from raycore.triangle import intersect_ray
@@ -65,7 +65,7 @@ def test_the_fast_oracle_equals_the_plain_one(rng):
     origins = np.concatenate([origins, far]).astype(np.float32)
     dirs = np.ascontiguousarray(np.concatenate([dirs, centres - far]), np.float32)
     n = len(origins)
-    assert n % 64 != 0
+    assert n % RAY_CHUNK != 0
     t_min = np.where(rng.random(n) < 0.2, rng.random(n) * 2, 0).astype(np.float32)
     t_max = np.where(rng.random(n) < 0.2, rng.random(n) * 3, np.inf).astype(np.float32)
     want = brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tv)
