@@ -17,6 +17,7 @@ import pytest
 from click.testing import CliRunner
 
 from cli.main import main
+from fork_launcher import Forked
 from raycore.image_io import read_exr
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,6 +34,14 @@ def frustrace(*args, **kw):
     return subprocess.Popen([sys.executable, "-m", "cli.main", *map(str, args)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
+
+
+def forked(log_dir: Path, *args):
+    """frustrace in a process forked from a server that has imported it
+    (fork_launcher.py: ~0.1 s to start instead of ~0.8), for the renders
+    started only to be killed or raced; what a fresh process does on a
+    signal is tested with frustrace()."""
+    return Forked(args, ROOT, log_dir)
 
 
 def exr_frames(d: Path):
@@ -52,7 +61,7 @@ def pixels(path):
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("reference")
-    proc = frustrace("render", DEMO, "-o", out, *ARGS)
+    proc = forked(tmp_path_factory.mktemp("logs"), "render", DEMO, "-o", out, *ARGS)
     assert proc.wait(timeout=300) == 0, proc.stderr.read()
     return out
 
@@ -69,7 +78,7 @@ def test_sigkill_at_random_moments_then_resume_loses_and_repeats_nothing(tmp_pat
         before = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in exr_frames(out)} if out.exists() else {}
         if len(before) == N_FRAMES:
             break
-        proc = frustrace("render", DEMO, "-o", out, "--resume", *ARGS)
+        proc = forked(tmp_path / "logs", "render", DEMO, "-o", out, "--resume", *ARGS)
         target = min(N_FRAMES - 1, len(before) + rng.randint(1, 4))
         while proc.poll() is None and (len(exr_frames(out)) if out.exists() else 0) < target:
             time.sleep(0.002)
@@ -82,7 +91,7 @@ def test_sigkill_at_random_moments_then_resume_loses_and_repeats_nothing(tmp_pat
             if p.name in before:
                 assert (p.stat().st_ino, p.stat().st_mtime_ns) == before[p.name], f"{p.name} rendered again"
     assert kills >= min(KILLS, 10)
-    proc = frustrace("render", DEMO, "-o", out, "--resume", *ARGS)
+    proc = forked(tmp_path / "logs", "render", DEMO, "-o", out, "--resume", *ARGS)
     assert proc.wait(timeout=300) == 0, proc.stderr.read()
     assert [p.name for p in exr_frames(out)] == [p.name for p in exr_frames(reference)]
     for p in exr_frames(out):
@@ -179,7 +188,7 @@ def test_io_faults_name_the_frame_and_keep_earlier_frames(tmp_path, monkeypatch,
 
 def test_two_resume_renders_into_one_directory_share_the_frames(tmp_path, reference):
     out = tmp_path / "out"
-    procs = [frustrace("render", DEMO, "-o", out, "--resume", *ARGS) for _ in range(2)]
+    procs = [forked(tmp_path / "logs", "render", DEMO, "-o", out, "--resume", *ARGS) for _ in range(2)]
     for p in procs:
         assert p.wait(timeout=300) == 0, p.stderr.read()
     assert [p.name for p in exr_frames(out)] == [p.name for p in exr_frames(reference)]
