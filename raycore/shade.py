@@ -169,18 +169,48 @@ def write_pixels(pixel, rgb, depth, bg, weight, accumulate, out_rgba, out_z):
 def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumulate, out_rgba, out_z):
     """write_pixels for one block: the block x block pixels at (x0, y0) of
     an image `width` wide, and samples 0..n-1, the block's hits in
-    row-major order (as surface.fill_block makes them). One pass over the
-    pixels, each written once (a background pass and then a scatter wrote
-    the hit pixels twice: 10-25 % more time); the same
-    sums as write_pixels when accumulating."""
+    row-major order (as surface.fill_block makes them); the same sums as
+    write_pixels when accumulating.
+
+    Overwriting, the block's rows are filled with the background first, in
+    loops over contiguous pixels that LLVM vectorizes, and the samples are
+    then written over it, at unsigned indices: a hit pixel is written twice,
+    and yet on hand at 1024^2 (409K hits, one thread, captured frames) the
+    block writes take 2.7-2.8 ms against 4.1-6.3 ms for one pass over the
+    pixels choosing between sample and background (a branch and five
+    scalar stores a pixel). Accumulating, that one pass stays (each pixel's
+    background weight is added once, as its samples are)."""
     height = out_z.shape[0] // width
+    if not accumulate:
+        flat = out_rgba.reshape(-1)
+        b0, b1, b2 = bg[0], bg[1], bg[2]
+        m = np.uint64(min(x0 + block, width) - x0)
+        four = np.uint64(4)
+        for y in range(y0, min(y0 + block, height)):
+            p0 = np.uint64(y * width + x0)
+            for k in range(m):
+                q = (p0 + k) * four
+                flat[q] = b0
+                flat[q + np.uint64(1)] = b1
+                flat[q + np.uint64(2)] = b2
+                flat[q + np.uint64(3)] = F0
+                out_z[p0 + k] = INF
+        for i in range(n):
+            iu = np.uint64(i)
+            p = np.uint64(pixel[iu])
+            q = p * four
+            flat[q] = rgb[0, iu]
+            flat[q + np.uint64(1)] = rgb[1, iu]
+            flat[q + np.uint64(2)] = rgb[2, iu]
+            flat[q + np.uint64(3)] = F1
+            out_z[p] = depth[iu]
+        return
     i = 0
     for y in range(y0, min(y0 + block, height)):
         for x in range(x0, min(x0 + block, width)):
             p = y * width + x
             if i < n and pixel[i] == p:
-                if accumulate:
-                    put_background(p, bg, weight, accumulate, out_rgba, out_z)
+                put_background(p, bg, weight, accumulate, out_rgba, out_z)
                 put_sample(p, rgb, i, depth, bg, weight, accumulate, out_rgba, out_z)
                 i += 1
             else:
