@@ -49,7 +49,11 @@ def shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis,
         point_light = lights[li, 0] == F0
         lx, ly, lz = lights[li, 1], lights[li, 2], lights[li, 3]
         cr, cg, cb = lights[li, 4], lights[li, 5], lights[li, 6]
-        vis_c = vis[li, i0:i1] if use_vis else spec_w      # spec_w: unread stand-in
+        # without visibility, a row the loop only reads stands in (unread):
+        # spec_w, which it writes, made LLVM's overlap check fail at run
+        # time and the loop run scalar (hand's sweep without shadows, one
+        # thread, 22.8 against 17.0 ms with a visibility row)
+        vis_c = vis[li, i0:i1] if use_vis else ks_c
         n_spec = 0
         for k in range(m):
             if point_light:
