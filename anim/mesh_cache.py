@@ -36,13 +36,20 @@ _MTL_FILE = re.compile(rb"^[ \t]*(?:map_\w+|bump|disp|decal|norm|refl)[ \t]+(?:.
                        re.MULTILINE)
 
 
-def cache_dir():
-    """The directory of the entries, or None when the cache is off."""
+def cache_root():
+    """frustrace's cache directory (the meshes', and the workers' warm-up
+    markers, anim/render/warm_lock.py), or None when it is off."""
     root = os.environ.get("FRUSTRACE_CACHE_DIR")
     if root is None:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
         root = os.path.join(base, "frustrace")
-    return Path(root) / "meshes" if root else None
+    return Path(root) if root else None
+
+
+def cache_dir():
+    """The directory of the entries, or None when the cache is off."""
+    root = cache_root()
+    return root / "meshes" if root is not None else None
 
 
 @functools.lru_cache(maxsize=1)

@@ -131,6 +131,7 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
 
     from .renderer import SceneRenderer, warm_up
     from .settings import shading_of
+    from .warm_lock import warm_once
     key = (bundle.digest, tuple(sorted(cfg_fields.items())))
     if key in _WORKER_SCENES:
         return _WORKER_SCENES[key]
@@ -143,7 +144,8 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
     scene = AnimatedScene(root / bundle.scene_name, bundle.camera)
     cfg = RenderConfig(**cfg_fields)
     shading = shading_of(scene)
-    compile_s, _ = warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]))
+    # one cold compile per machine, not one per worker (warm_lock.py)
+    compile_s, _ = warm_once(repr(key), lambda: warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0])))
     _WORKER_SCENES[key] = WorkerScene(scene, SceneRenderer(scene, cfg, shading), compile_s, directory)
     return _WORKER_SCENES[key]
 
