@@ -11,6 +11,7 @@ instead of 1.0 s, and the test 3.3 s instead of 16. The child is a process of it
 its own threads, files and exit status, killed by a real SIGKILL. Tests of
 what a fresh process does (the entry point, Ctrl-C, start-up time, imports)
 keep starting `python -m cli.main`."""
+import io
 import itertools
 import multiprocessing
 import os
@@ -95,7 +96,9 @@ class Forked:
 
     @property
     def stderr(self):
-        return open(self._err, encoding="utf-8", errors="replace")
+        """What the child wrote to its standard error so far, as a file to
+        read (read here, so that no file handle is left open)."""
+        return io.StringIO(self._err.read_text(encoding="utf-8", errors="replace"))
 
 
 __all__ = ["Forked"]
