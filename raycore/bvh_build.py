@@ -36,6 +36,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 from ._jit import helper, kernel, parallel_kernel
 from .row8 import min_rows, swap_rows
 from .thread_pool import thread_pool
+from .tile_queue import next_tile
 
 N_BINS = 16
 # SAH constants: a node visit costs about as much as one ray/triangle test
@@ -516,31 +517,87 @@ def refit_plan(child, count, root, used):
     descendants are the contiguous run child[x] .. front_end - 1 (the left
     subtree's, then the right one's): every piece is refit from the end of
     its run back to its root with no other piece's node in between."""
+    run_end = _run_end.py_func          # in Python: no compile for a few calls a build
     front, tops = [root], []
     if used >= REFIT_MIN_NODES:
         while len(front) < REFIT_PIECES:
             inner = [x for x in front if count[x] <= 0 and child[x] >= 0]
             if not inner:
                 break
-            x = max(inner, key=lambda y: _run_end(child, count, y) - child[y])   # the largest piece
+            x = max(inner, key=lambda y: run_end(child, count, y) - child[y])   # the largest piece
             front.remove(x)
             tops.append(x)
             front += [int(child[x]), int(child[x]) + 1]
     front.sort()
-    ends = [_run_end(child, count, x) if count[x] <= 0 and child[x] >= 0 else x + 1 for x in front]
+    ends = [run_end(child, count, x) if count[x] <= 0 and child[x] >= 0 else x + 1 for x in front]
     return np.array(front, np.int64), np.array(ends, np.int64), np.array(sorted(tops, reverse=True), np.int64)
 
 
+@helper
 def _run_end(child, count, x):
     """One past the last descendant of inner node x (see refit_plan)."""
     while True:
-        c = int(child[x])
+        c = np.int64(child[x])
         if count[c + 1] <= 0 and child[c + 1] >= 0:
             x = c + 1
         elif count[c] <= 0 and child[c] >= 0:
             x = c
         else:
             return c + 2
+
+
+# build_small_trees takes trees below this many triangles: build_region
+# splits them on one thread all the same (below 2 MIN_TASK), and their
+# fewer than REFIT_MIN_NODES nodes are refit in one piece
+SMALL_TREE = min(2 * MIN_TASK, REFIT_MIN_NODES // 2)
+
+
+@kernel
+def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo, max_leaf, node, node_i, tri,
+                      verts, leaf_faces, used, cost, run_end, queue):
+    """Trees `which` (each of fewer than SMALL_TREE triangles: tree g's are
+    tris[tri_start[g]:tri_start[g + 1]]) built into their regions as
+    scene_bvh's one-tree path builds them (prim_bounds, build_region,
+    unused nodes cleared, gather_references), in one call: that path spends
+    ~25 us of Python and dispatch a tree around ~20 us of building, and
+    tumbling marbles rebuild ~50 trees of 80 triangles a frame. Into
+    used[j], cost[j], run_end[j] (refit_plan's one piece) for which[j].
+    The trees this thread pulls from `queue` (thread_pool.on_threads
+    starts one a thread; the trees' regions are disjoint)."""
+    box = node[:, :6]
+    child = node_i[:, CHILD]
+    count = node_i[:, COUNT]
+    no_tasks = np.empty(1, np.int64)
+    no_span = np.empty((1, 2 * ROW), np.float32)
+    while True:
+        j = next_tile(queue, which.shape[0])
+        if j < 0:
+            break
+        g = which[j]
+        group = tris[tri_start[g]:tri_start[g + 1]]
+        m = group.shape[0]
+        n0, r0 = node_lo[g], ref_lo[g]
+        bounds = np.empty((m, 6), np.float32)
+        centroids = np.empty((m, 3), np.float32)
+        prim_bounds(tri_verts, group, bounds, centroids)
+        prims = np.empty((m, ROW), np.float32)
+        cents = np.empty((m, ROW), np.float32)
+        span0 = np.empty((1, 2 * ROW), np.float32)
+        _start_build(bounds, centroids, prims, cents, span0)
+        s_box = np.empty((4 * m + 1, 6), np.float32)
+        s_child = np.empty(4 * m + 1, np.int64)
+        s_count = np.empty(4 * m + 1, np.int64)
+        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count, 0,
+                     no_tasks, no_tasks, no_tasks, no_span)
+        order = prims.view(np.int32)[:, 3].copy()
+        n_used, c = _relayout(s_box, s_child, s_count, no_tasks, n0, r0, box, child, count)
+        for i in range(n0 + n_used, n0 + 2 * m):
+            child[i] = -1
+            count[i] = 0
+        gather_references(group, order, tri_verts, faces, r0, tri, verts, leaf_faces)
+        used[j] = n_used
+        cost[j] = c
+        run_end[j] = _run_end(child, count, n0) if count[n0] <= 0 and child[n0] >= 0 else n0 + 1
 
 
 @helper

@@ -23,8 +23,10 @@ import time
 import numba
 import numpy as np
 
-from .bvh_build import (MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, gather_references, prim_bounds, refit,
-                         refit_plan)
+from .bvh_build import (MAX_LEAF, REFIT_PIECES, SMALL_TREE, Bvh, build_region, build_small_trees, empty_bvh,
+                         gather_references, prim_bounds, refit, refit_plan)
+from .thread_pool import on_threads
+from .tile_queue import new_queue
 
 # a refit tree is rebuilt when its SAH cost exceeds this many times its cost
 # at the last build. The SAH cost is the expected work of a ray, so a tree
@@ -36,6 +38,11 @@ from .bvh_build import (MAX_LEAF, REFIT_PIECES, Bvh, build_region, empty_bvh, ga
 # rebuilds ~15 small trees a frame (~5 ms) and 1.5 about 6 (~2 ms), for
 # shadow times of 90 and 95 ms: a wash (bench, 2026-12-02).
 REBUILD_GROWTH = 1.3
+# small trees (bvh_build.SMALL_TREE) built at once, at the first frame or
+# rebuilt in one, go through one call (build_small_trees) from this many on:
+# one by one they cost ~25 us each of Python and dispatch, and that call's
+# kernel compiles in ~2.2 s, which scenes of few objects never pay
+BATCH_TREES = 8
 
 
 class SceneBvh:
@@ -71,6 +78,10 @@ class SceneBvh:
         self._moving_roots = np.ascontiguousarray(self.node_lo[self._moving_idx])
         self._moving_cost = np.empty(len(self._moving_idx), np.float32)
         self.used = np.zeros(n_groups, np.int64)     # nodes each tree's build used
+        # every tree's triangles in one array (tree g's: all_tris[tri_start[g]:tri_start[g + 1]])
+        self.tri_start = np.zeros(n_groups + 1, np.int64)
+        np.cumsum([len(g) for g in groups], out=self.tri_start[1:])
+        self.all_tris = np.concatenate(groups) if groups else np.zeros(0, np.int32)
         # the moving trees' refit plans (bvh_build.refit_plan) in fixed slots,
         # REFIT_PIECES pieces and REFIT_PIECES - 1 top nodes a tree (-1: unused),
         # rewritten by a tree's build: no joining of 110 marbles' plans per frame
@@ -123,18 +134,48 @@ class SceneBvh:
         self.built_cost[g] = self.cost[g] = cost
         self.used[g] = used
         if self.moving[g]:
-            front, ends, tops = refit_plan(b.child, b.count, n0, used)
-            j = self.slot[g]
-            p0, t0 = self.front_start[j], self.tops_start[j]
-            self.front[p0:self.front_start[j + 1]], self.tops[t0:self.tops_start[j + 1]] = -1, -1
-            self.front[p0:p0 + len(front)], self.front_end[p0:p0 + len(front)] = front, ends
-            self.tops[t0:t0 + len(tops)] = tops
+            self._set_plan(g, *refit_plan(b.child, b.count, n0, used))
+
+    def _set_plan(self, g, front, ends, tops):
+        """Moving tree g's refit plan into its slots."""
+        j = self.slot[g]
+        p0, t0 = self.front_start[j], self.tops_start[j]
+        self.front[p0:self.front_start[j + 1]], self.tops[t0:self.tops_start[j + 1]] = -1, -1
+        self.front[p0:p0 + len(front)], self.front_end[p0:p0 + len(front)] = front, ends
+        self.tops[t0:t0 + len(tops)] = tops
+
+    def _build_trees(self, tri_verts, trees):
+        """Build trees `trees` (ids): the small ones in one call when there
+        are BATCH_TREES of them (the same trees bit for bit), the others
+        one by one."""
+        sizes = self.tri_start[1:] - self.tri_start[:-1]
+        small = [g for g in trees if sizes[g] < SMALL_TREE]
+        if len(small) < BATCH_TREES:
+            small = []
+        for g in trees:
+            if sizes[g] >= SMALL_TREE or not small:
+                self._build(tri_verts, g)
+        if not small:
+            return
+        which = np.array(small, np.int64)
+        used = np.empty(len(which), np.int64)
+        cost = np.empty(len(which), np.float32)
+        ends = np.empty(len(which), np.int64)
+        b = self.bvh
+        on_threads(build_small_trees, min(numba.get_num_threads(), len(which)), tri_verts, self.faces,
+                   self.all_tris, self.tri_start, which, self.node_lo, self.ref_lo, MAX_LEAF, b.node, b.node_i, b.tri,
+                   b.verts, self.leaf_faces, used, cost, ends, new_queue())
+        self.built_cost[which] = self.cost[which] = cost
+        self.used[which] = used
+        empty = np.zeros(0, np.int64)
+        for g, n0, end in zip(small, self.node_lo[which], ends):
+            if self.moving[g]:
+                self._set_plan(g, np.array([n0], np.int64), np.array([end], np.int64), empty)
 
     def build_all(self, tri_verts):
         """Build every tree anew from these triangle corners (the first
         frame; bench times it)."""
-        for g in range(len(self.groups)):
-            self._build(tri_verts, g)
+        self._build_trees(tri_verts, list(range(len(self.groups))))
         self.first = False
 
     def update(self, tri_verts, vertices=None) -> Bvh:
@@ -155,10 +196,10 @@ class SceneBvh:
             refit_ms = (time.perf_counter() - t0) * 1e3
             growth = float(np.max(self.cost / np.maximum(self.built_cost, 1e-30))) if len(self.cost) else 1.0
             t1 = time.perf_counter()
-            for g in idx:
-                if self.cost[g] > REBUILD_GROWTH * self.built_cost[g]:
-                    self._build(tri_verts, g)
-                    n_built += 1
+            grown = [int(g) for g in idx if self.cost[g] > REBUILD_GROWTH * self.built_cost[g]]
+            if grown:
+                self._build_trees(tri_verts, grown)
+            n_built = len(grown)
             build_ms = (time.perf_counter() - t1) * 1e3
         t1 = time.perf_counter()
         self._top_level()

@@ -623,3 +623,72 @@ def test_every_built_box_is_the_exact_bound_of_its_triangles(rng):
             assert np.array_equal(bvh.box[i, :3], kids[:, :3].min(0))
             assert np.array_equal(bvh.box[i, 3:], kids[:, 3:].max(0))
     assert sorted(seen) == list(range(len(tv)))
+
+
+def test_many_small_trees_built_in_one_call_are_those_built_one_by_one(rng, monkeypatch):
+    """A scene of many small objects (tumbling marbles) builds and rebuilds
+    its small trees in one call (build_small_trees, on the threads): every
+    node, reference, leaf-order corner and vertex id, refit plan and SAH
+    cost is the one-by-one path's, bit for bit, for trees of 1 to
+    SMALL_TREE - 1 triangles beside a large tree and a static one, with
+    triangles spread over the float range, all in one point, and with
+    infinite and NaN corners; the first frame's build and a frame whose
+    scattered trees are rebuilt (and the refits between) both."""
+    import raycore.scene_bvh as scene_bvh
+    from raycore.bvh_build import SMALL_TREE
+    sizes = [1, 2, 7, 8, 9, 80, 80, 80, SMALL_TREE - 1, 33, 50, 60, 70, 90, SMALL_TREE + 40, 64]
+    parts = []
+    for k, m in enumerate(sizes):
+        part = soup(rng, m, spread=1.0, size=0.2) + np.float32(3 * k)
+        if k == 2:
+            part[:] = np.float32([1, 2, 3, 1, 2, 3.5, 1.5, 2, 3])            # all in one point
+        if k == 8:
+            part[rng.integers(0, m, 20), rng.integers(0, 9, 20)] = np.inf
+            part[rng.integers(0, m, 20), rng.integers(0, 9, 20)] = np.nan
+        if k == 9:
+            part *= (2.0 ** np.linspace(-120, 120, m)).astype(np.float32)[:, None]
+        parts.append(part)
+    tv0 = np.ascontiguousarray(np.concatenate(parts))
+    n = len(tv0)
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    ranges = [(int(starts[k]), int(starts[k + 1])) for k in range(len(sizes) - 1)]     # the last part is static
+    faces = np.arange(3 * n, dtype=np.int32).reshape(n, 3)[rng.permutation(n)]        # a mesh, ids shuffled
+    vertices0 = np.empty((3 * n, 3), np.float32)
+    vertices0[faces.reshape(-1)] = tv0.reshape(-1, 3)
+    calls = []
+    real = scene_bvh.build_small_trees
+    monkeypatch.setattr(scene_bvh, "build_small_trees", lambda *a: calls.append(1) or real(*a))
+    batched = SceneBvh.of_objects(n, ranges, faces=faces)
+    single = SceneBvh.of_objects(n, ranges, faces=faces)
+    assert len(batched.groups) >= scene_bvh.BATCH_TREES
+
+    def update_both(vertices):
+        tv = np.ascontiguousarray(vertices[faces].reshape(n, 9))
+        calls.clear()
+        batched.update(tv, vertices)
+        assert calls, "the small trees were not built in one call"
+        monkeypatch.setattr(scene_bvh, "BATCH_TREES", 10 ** 9)
+        calls.clear()
+        single.update(tv, vertices)
+        assert not calls
+        monkeypatch.setattr(scene_bvh, "BATCH_TREES", 8)
+        assert batched.stats["bvh_rebuilt"] == single.stats["bvh_rebuilt"]
+        for a, b in ((batched.bvh.node_i, single.bvh.node_i), (batched.bvh.tri, single.bvh.tri),
+                     (batched.bvh.verts.view(np.int32), single.bvh.verts.view(np.int32)),
+                     (batched.leaf_faces, single.leaf_faces), (batched.used, single.used),
+                     (batched.cost.view(np.int32), single.cost.view(np.int32)),
+                     (batched.built_cost.view(np.int32), single.built_cost.view(np.int32))):
+            np.testing.assert_array_equal(a, b)
+        live = single.front >= 0
+        np.testing.assert_array_equal(batched.front, single.front)
+        np.testing.assert_array_equal(batched.front_end[live], single.front_end[live])
+        np.testing.assert_array_equal(batched.tops, single.tops)
+        return batched.stats["bvh_rebuilt"]
+
+    assert update_both(vertices0) == len(batched.groups)
+    # every moving triangle elsewhere within its object: each tree is rebuilt
+    vertices = vertices0.copy()
+    for s, e in ranges:
+        ids = faces[s:e].reshape(-1)
+        vertices[ids] = vertices0[ids][rng.permutation(len(ids))]
+    assert update_both(vertices) >= scene_bvh.BATCH_TREES
