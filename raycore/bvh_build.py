@@ -569,8 +569,8 @@ def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo,
     tris[tri_start[g]:tri_start[g + 1]]) built into their regions as
     scene_bvh's one-tree path builds them (prim_bounds, build_region,
     unused nodes cleared, gather_references), in one call: that path spends
-    ~25 us of Python and dispatch a tree around ~20 us of building, and
-    tumbling marbles rebuild ~50 trees of 80 triangles a frame. Into
+    ~25 us of Python and dispatch a tree around ~15-20 us of building, and
+    tumbling marbles rebuild ~9 trees of 80 triangles a frame (up to 50). Into
     used[j], cost[j], run_end[j] (refit_plan's one piece) for which[j].
     The trees this thread pulls from `queue` (thread_pool.on_threads
     starts one a thread; the trees' regions are disjoint)."""

@@ -656,6 +656,7 @@ def test_many_small_trees_built_in_one_call_are_those_built_one_by_one(rng, monk
     vertices0 = np.empty((3 * n, 3), np.float32)
     vertices0[faces.reshape(-1)] = tv0.reshape(-1, 3)
     calls = []
+    batch = scene_bvh.BATCH_TREES
     real = scene_bvh.build_small_trees
     monkeypatch.setattr(scene_bvh, "build_small_trees", lambda *a: calls.append(1) or real(*a))
     batched = SceneBvh.of_objects(n, ranges, faces=faces)
@@ -671,7 +672,7 @@ def test_many_small_trees_built_in_one_call_are_those_built_one_by_one(rng, monk
         calls.clear()
         single.update(tv, vertices)
         assert not calls
-        monkeypatch.setattr(scene_bvh, "BATCH_TREES", 8)
+        monkeypatch.setattr(scene_bvh, "BATCH_TREES", batch)
         assert batched.stats["bvh_rebuilt"] == single.stats["bvh_rebuilt"]
         for a, b in ((batched.bvh.node_i, single.bvh.node_i), (batched.bvh.tri, single.bvh.tri),
                      (batched.bvh.verts.view(np.int32), single.bvh.verts.view(np.int32)),
