@@ -3,7 +3,9 @@ vectorizes) against its definitions written out in float64 numpy, on made-up
 hits: random triangles with degenerate ones among them (a point, a line),
 vertex normals that cancel (the smooth normal falls back to the geometric
 one), textured and flat materials, smooth and flat facets, and an image
-whose blocks are part empty."""
+whose blocks are part empty. The hits are scattered (each pixel its own
+triangle: every block takes fill_gathered) or in runs along the rows, long
+and short, so that blocks take fill_run and fill_gathered both."""
 import numpy as np
 import pytest
 
@@ -62,8 +64,44 @@ def _oracle(cam, w, h, prim, b1, b2, t, verts, faces, normals, smooth, materials
     return {k: np.array(v) for k, v in out.items()}
 
 
+def _runs(rng, w, h, n_t):
+    """Triangles in runs along the rows: long runs (8-40 pixels) in the top
+    rows, long and short (1-3) mixed in the middle ones, short ones below."""
+    prim = np.empty((h, w), np.int32)
+    for y in range(h):
+        x = 0
+        while x < w:
+            long_run = y < 12 or (y < 32 and rng.random() < 0.5)
+            length = rng.integers(8, 41) if long_run else rng.integers(1, 4)
+            prim[y, x:x + length] = rng.integers(0, n_t)
+            x += length
+    prim[:3, :30] = np.arange(3)[:, None]                            # the degenerate triangles in runs
+    return prim.reshape(-1)
+
+
+def _block_paths(prim, w, h):
+    """(blocks that take fill_run, their runs shorter than LONG_RUN, blocks that take fill_gathered alone)."""
+    from raycore.surface import GATHER_BLOCK, LONG_RUN, RUN_BLOCK
+    img = prim.reshape(h, w)
+    run_blocks = short_runs = gathered_blocks = 0
+    for y0 in range(0, h, GATHER_BLOCK):
+        for x0 in range(0, w, GATHER_BLOCK):
+            v = img[y0:y0 + GATHER_BLOCK, x0:x0 + GATHER_BLOCK]
+            v = v[v >= 0]
+            if v.size == 0:
+                continue
+            lengths = np.diff(np.r_[0, np.flatnonzero(np.diff(v) != 0) + 1, v.size])
+            if v.size >= RUN_BLOCK * lengths.size:
+                run_blocks += 1
+                short_runs += int(np.sum(lengths < LONG_RUN))
+            else:
+                gathered_blocks += 1
+    return run_blocks, short_runs, gathered_blocks
+
+
+@pytest.mark.parametrize("layout", ["scattered", "runs"])
 @pytest.mark.parametrize("smooth", [True, False], ids=["vertex normals", "flat facets"])
-def test_the_gather_matches_its_definitions(smooth):
+def test_the_gather_matches_its_definitions(smooth, layout):
     from raycore.camera import camera_basis
     from raycore.surface import GATHER_BLOCK, visible_surface
     from raycore.trace import row_major_offsets
@@ -73,12 +111,19 @@ def test_the_gather_matches_its_definitions(smooth):
     w, h = GATHER_BLOCK * 2 + 7, GATHER_BLOCK + 9                  # part-empty edge blocks
     cam = camera_basis([0.0, 0.0, 9.0], [0, 0, 0], [0, 1, 0], 50.0, w, h)
     n = w * h
-    prim = rng.integers(0, n_t, n).astype(np.int32)
-    prim[rng.random(n) < 0.3] = -1                                   # misses
-    prim[:40] = np.arange(40) % 3                                    # the degenerate triangles hit
+    if layout == "runs":
+        prim = _runs(rng, w, h, n_t)
+        prim[rng.random(n) < 0.05] = -1                              # misses, inside runs too
+        run_blocks, short_runs, gathered_blocks = _block_paths(prim, w, h)
+        assert run_blocks and short_runs and gathered_blocks         # every path of fill_block taken
+    else:
+        prim = rng.integers(0, n_t, n).astype(np.int32)
+        prim[rng.random(n) < 0.3] = -1                               # misses
+        prim[:40] = np.arange(40) % 3                                # the degenerate triangles hit
     b1 = rng.random(n).astype(np.float32)
     b2 = (rng.random(n) * (1 - b1)).astype(np.float32)
-    b1[:40:3], b2[:40:3] = 0.5, 0.0                                  # where the normals of triangle 2 cancel
+    cancel = np.flatnonzero(prim == 2)[::2]
+    b1[cancel], b2[cancel] = 0.5, 0.0                                # where the normals of triangle 2 cancel
     t = (rng.random(n) * 10 + 1).astype(np.float32)
     uvs = rng.random((len(verts), 2)).astype(np.float32) * 3 - 1   # wraps around
     tex = rng.random((5, 7, 3)).astype(np.float32)
