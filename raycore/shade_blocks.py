@@ -65,7 +65,7 @@ def shade_blocks(cam, jx, jy, hit_t, hit_prim, hit_b1, hit_b2, row_off, col_off,
     zero = np.int64(0)
     blocks_x, n_blocks = tile_count(width, row_off.shape[0], block)
     m = GATHER_BLOCK * GATHER_BLOCK
-    found = np.empty((3, m), np.int64)
+    found = np.empty((4, m + 1), np.int64)
     pixel = np.empty(m, np.int32)
     prim = np.empty(m, np.int32)
     point = np.empty((3, m), F32)

@@ -126,19 +126,14 @@ def tri_corners(tri_verts, pu):
 
 
 @helper
-def run_end(prim_out, start, j, n):
-    """The row after the run of rows j.. (of start + j.., n in all) that hit prim_out[start + j]'s triangle."""
-    prim = prim_out[np.uint64(start + j)]
-    r = j + 1
-    while r < n and prim_out[np.uint64(start + r)] == prim:
-        r += 1
-    return r
-
-
-@helper
-def textured_row(prim_out, tri_material, materials, start, j):
-    """Whether row j's triangle (prim_out[start + j]) has a textured material."""
-    return materials[np.uint64(tri_material[np.uint64(prim_out[np.uint64(start + j)])]), 5] >= F0
+def run_loop_takes(found, r, runs, textured_scene, prim_out, tri_material, materials, start):
+    """Whether fill_block's run loop fills run r (rows found[3, r] to
+    found[3, r + 1] - 1): a textured run, or in a block of long runs
+    (`runs`) one of LONG_RUN rows or more."""
+    j0 = found[3, r]
+    if runs and found[3, r + 1] - j0 >= LONG_RUN:
+        return True
+    return textured_scene and materials[np.uint64(tri_material[np.uint64(prim_out[np.uint64(start + j0)])]), 5] >= F0
 
 
 @helper
@@ -158,13 +153,14 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                pixel, prim_out, point, lifted, geo_n, smooth_n, view, depth, mag, albedo, ks, shininess):
     """Fill the Surface rows of block b's visible samples (block x block
     pixels, row by row), from row `start` on; returns the row after the
-    last. found: (3, block^2) i64 scratch. Its own compiled function,
+    last. found: (4, block^2 + 1) i64 scratch. Its own compiled function,
     called once a block: fill_surface writes the whole pass's rows,
     shade_blocks.shade_image a block's rows into buffers that stay in
     cache. Normals are turned to the viewer's side; the lift and the smooth
     normal use the vertex normals turned the same way.
 
-    The block's hits are found first (index, pixel x and y, triangle). A
+    The block's hits are found first (index, pixel x and y, triangle, and
+    where each run of samples on one triangle starts, in found[3]). A
     triangle covers ~50-120 of a block's pixels on the built-in scenes, in
     runs of ~6-29 along a row. A run loop fills a run with its triangle's
     corners, normals, material, texture and UVs read once, as scalars
@@ -197,17 +193,20 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                 found[2, np.uint64(n)] = y
                 prim_out[np.uint64(start + n)] = prim
                 pixel[np.uint64(start + n)] = y * width + x
-                n += 1
+                # a run's start, kept if the triangle changes (without a branch)
+                found[3, np.uint64(n_runs)] = n
                 n_runs += 1 if prim != last else 0
                 last = prim
+                n += 1
     smooth = faces.shape[0] > 0      # vertex normals given: lift and smooth normal
     textured_scene = uvs.shape[0] > 0 and smooth and tex_info.shape[0] > 0
+    found[3, np.uint64(n_runs)] = n
     runs = n >= RUN_BLOCK * n_runs   # else only textured runs take the run loop
-    j0 = 0
-    j1 = run_end(prim_out, start, j0, n) if n > 0 else n
-    while j0 < n:
-        if (runs and j1 - j0 >= LONG_RUN) or (textured_scene and textured_row(prim_out, tri_material, materials,
-                                                                               start, j0)):
+    r = 0
+    while r < n_runs:
+        j0 = found[3, r]
+        j1 = found[3, r + 1]
+        if run_loop_takes(found, r, runs, textured_scene, prim_out, tri_material, materials, start):
             # rows j0..j1-1, all on one triangle
             pu = np.uint64(prim_out[np.uint64(start + j0)])
             v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z = tri_corners(tri_verts, pu)
@@ -280,16 +279,14 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                 albedo[2, iu] = kb * tb
                 ks[iu] = mks
                 shininess[iu] = msh
-            j0 = j1
-            j1 = run_end(prim_out, start, j0, n) if j0 < n else n
+            r += 1
             continue
-        # untextured short runs, up to the next run for the run loop (whose end is then known)
-        s1 = j1
-        e = run_end(prim_out, start, s1, n) if s1 < n else n
-        while s1 < n and (e - s1 < LONG_RUN or not runs) and not (
-                textured_scene and textured_row(prim_out, tri_material, materials, start, s1)):
-            s1 = e
-            e = run_end(prim_out, start, s1, n) if s1 < n else n
+        # untextured short runs, up to the next run for the run loop
+        r1 = n_runs if not runs and not textured_scene else r + 1
+        while r1 < n_runs and not run_loop_takes(found, r1, runs, textured_scene, prim_out, tri_material, materials,
+                                                 start):
+            r1 += 1
+        s1 = found[3, r1]
         # rows j0..s1-1, each sample's triangle, normals and material gathered
         for j in range(j0, s1):
             k = np.uint64(found[0, j])
@@ -345,8 +342,7 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
             albedo[2, iu] = materials[mat, 2]
             ks[iu] = materials[mat, 3]
             shininess[iu] = materials[mat, 4]
-        j0 = s1
-        j1 = e
+        r = r1
     return start + n
 
 
@@ -364,7 +360,7 @@ def fill_surface(cam, jx, jy, hit_prim, hit_b1, hit_b2, row_off, col_off, block,
     thread_pool.on_threads; the visible surface is rarely spread evenly
     over the image). As a numba parallel loop it compiled in ~1.8 s more."""
     blocks_x, n_blocks = tile_count(col_off.shape[0], row_off.shape[0], block)
-    found = np.empty((3, block * block), np.int64)
+    found = np.empty((4, block * block + 1), np.int64)
     while True:
         b = next_tile(queue, n_blocks)
         if b < 0:
