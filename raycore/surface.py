@@ -141,9 +141,9 @@ def lift_corner(px, py, pz, side, w, cx, cy, cz, nx, ny, nz, qx, qy, qz, sx, sy,
     """Corner (cx, cy, cz), of barycentric weight w and vertex normal
     (nx, ny, nz) turned by `side`: its term of the lift toward the smooth
     surface, p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i, added to
-    (qx, qy, qz), and of the smooth normal, added to (sx, sy, sz). The
-    gathered loop writes the same sums out, and both loops their rows'
-    stores: with those stores in a helper of their own, the loops ran
+    (qx, qy, qz), and of the smooth normal, added to (sx, sy, sz); both
+    of fill_block's loops call it. Their rows' stores, which they share
+    too, are written out in each: in a helper of their own, the loops ran
     scalar (demo 36 -> 77 cycles a sample)."""
     nx, ny, nz = side * nx, side * ny, side * nz
     d = (px - cx) * nx + (py - cy) * ny + (pz - cz) * nz
@@ -175,8 +175,8 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
     sample's data (vectorized, AVX-512 gathers): gathers cost ~1-2 cycles
     an element on this machine kind, but on a short run the run loop's
     scalar remainder costs more. Per visible sample, one thread, captured
-    frames: demo 80 -> 51 cycles, toys 84 -> 51, hand 77 -> 57, runner
-    93 -> 76, torus 53 -> 55-60. The two loops are written out here, not
+    frames: demo 84 -> 55 cycles, toys 83 -> 53, hand 77 -> 63, runner
+    90 -> 78, torus (short runs, no texture) 54 -> 61-65. The two loops are written out here, not
     as helpers: inlined, they compiled ~1 s longer."""
     width = col_off.shape[0]
     height = row_off.shape[0]
@@ -314,23 +314,17 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                 m = max(m, abs(tri_verts[pu, c]))
             side = -F1 if gx * dx + gy * dy + gz * dz > F0 else F1
             gx, gy, gz = side * gx, side * gy, side * gz
-            # lift toward the smooth surface: p' = p - sum_i b_i min(0, (p - v_i).n_i) n_i
+            # lift toward the smooth surface and the smooth normal, corner by corner
             qx = qy = qz = F0
             sx = sy = sz = F0
             for c in range(3):
                 if smooth:
                     w = b0 if c == 0 else (b1 if c == 1 else b2)
                     v = np.uint64(faces[pu, c])
-                    nx, ny, nz = side * normals[v, 0], side * normals[v, 1], side * normals[v, 2]
-                    d = ((px - tri_verts[pu, 3 * c]) * nx + (py - tri_verts[pu, 3 * c + 1]) * ny
-                         + (pz - tri_verts[pu, 3 * c + 2]) * nz)
-                    lift = -w * min(d, F0)
-                    qx += lift * nx
-                    qy += lift * ny
-                    qz += lift * nz
-                    sx += w * nx
-                    sy += w * ny
-                    sz += w * nz
+                    qx, qy, qz, sx, sy, sz = lift_corner(px, py, pz, side, w, tri_verts[pu, 3 * c],
+                                                         tri_verts[pu, 3 * c + 1], tri_verts[pu, 3 * c + 2],
+                                                         normals[v, 0], normals[v, 1], normals[v, 2],
+                                                         qx, qy, qz, sx, sy, sz)
             sl = np.sqrt(sx * sx + sy * sy + sz * sz)
             inv = F1 / sl if sl > F0 else F0
             sx, sy, sz = (sx * inv, sy * inv, sz * inv) if sl > F0 else (gx, gy, gz)

@@ -4,8 +4,9 @@ hits: random triangles with degenerate ones among them (a point, a line),
 vertex normals that cancel (the smooth normal falls back to the geometric
 one), textured and flat materials, smooth and flat facets, and an image
 whose blocks are part empty. The hits are scattered (each pixel its own
-triangle: every block takes fill_gathered) or in runs along the rows, long
-and short, so that blocks take fill_run and fill_gathered both."""
+triangle: every untextured sample takes fill_block's gathered loop) or in
+runs along the rows, long and short, so that blocks take its run loop and
+its gathered loop both."""
 import numpy as np
 import pytest
 
@@ -80,7 +81,8 @@ def _runs(rng, w, h, n_t):
 
 
 def _block_paths(prim, w, h):
-    """(blocks that take fill_run, their runs shorter than LONG_RUN, blocks that take fill_gathered alone)."""
+    """(blocks of long runs, which fill_block's run loop takes, their runs
+    shorter than LONG_RUN, blocks whose untextured runs are all gathered)."""
     from raycore.surface import GATHER_BLOCK, LONG_RUN, RUN_BLOCK
     img = prim.reshape(h, w)
     run_blocks = short_runs = gathered_blocks = 0
