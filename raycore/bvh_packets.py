@@ -13,10 +13,13 @@ stack. A node is skipped when
   2. otherwise when no live ray's slab test hits it, tested a 16-ray chunk
      (one AVX-512 vector) at a time, branch-free within the chunk. Each
      stack entry carries the chunks that reached its parent's box (a ray
-     that misses a box misses everything inside it): an inner node tests
-     those chunks in order up to the first that hits and passes it and
-     every later one on (Wald 2007's first active ray, at the grain of a
-     vector), a leaf tests them all and keeps those that hit.
+     that misses a box misses everything inside it) and the chunk that
+     hit the parent: an inner node tests that chunk first and, if it hits,
+     passes every chunk on, else the others in order up to the first that
+     hits, passing it and every later one on (Wald 2007's first active
+     ray, at the grain of a vector; starting from the parent's chunk made
+     shadow packets 1-5 % faster on captured rays, the same visits), a
+     leaf tests them all and keeps those that hit.
 A leaf's triangles are tested against every ray of those chunks in one
 vectorized loop per triangle and chunk: the watertight Woop test with one axis
 permutation for the packet (the shear axis where every ray's direction is
@@ -65,6 +68,7 @@ PACKET = 128
 LANES = 16
 N_CHUNKS = PACKET // LANES
 CHUNK_BITS = 8                   # a stack entry's low bits: its chunks (N_CHUNKS <= CHUNK_BITS)
+NODE_SHIFT = CHUNK_BITS + 4      # then the chunk that hit the parent (4 bits), then the node
 # rows of a packet's ray array (N_ROWS, PACKET), read-only while it walks;
 # PU, PV, PK: the origin permuted to the packet's axes, SU, SV, SZ: the
 # ray's shear (Woop). Hits go to separate arrays (h_t, h_b1, h_b2, prim): a store into
@@ -310,31 +314,38 @@ def _chunk_hits_box(ray, h_t, c0, x0, y0, z0, x1, y1, z1):
 
 
 @helper
-def _chunks_hitting_box(ray, h_t, mask, box, i, exact):
-    """Of the chunks in `mask` (bit c: rays c*LANES..c*LANES+LANES-1), those
-    that may have a ray whose [t_min, t_max] overlaps box i, as a mask (0:
-    none does). A ray that misses a node misses its children, so they test
-    only these chunks. Not exact: the chunks are tested in order up to the
-    first that hits, which keeps every later one (Wald 2007's first active
-    ray, at the grain of a vector: a node that the packet's first rays hit
-    costs one vector test); exact: every chunk is tested."""
+def _chunks_hitting_box(ray, h_t, mask, box, i, exact, hint):
+    """(chunks, first): of the chunks in `mask`, those that may reach box i,
+    and the chunk found to hit it. Not exact (inner nodes): chunk `hint`
+    (the one that hit the parent) first, and if it hits, every chunk of
+    mask goes on; else the others in order up to the first that hits, which
+    keeps it and every later one. Exact (leaves): every chunk is tested."""
     x0, y0, z0 = box[i, 0], box[i, 1], box[i, 2]
     x1, y1, z1 = box[i, 3], box[i, 4], box[i, 5]
+    if not exact:
+        if (mask >> hint) & 1:
+            if _chunk_hits_box(ray, h_t, hint * LANES, x0, y0, z0, x1, y1, z1):
+                return mask, hint
+            mask &= ~(1 << hint)
+        for c in range(N_CHUNKS):
+            if (mask >> c) & 1 and _chunk_hits_box(ray, h_t, c * LANES, x0, y0, z0, x1, y1, z1):
+                return (mask >> c) << c, c
+        return 0, 0
     out = 0
     for c in range(N_CHUNKS):
         if (mask >> c) & 1 and _chunk_hits_box(ray, h_t, c * LANES, x0, y0, z0, x1, y1, z1):
-            if not exact:
-                return (mask >> c) << c
             out |= 1 << c
-    return out
+    return out, 0
 
 
 @helper
-def _push_children(stack, top, left, left_first, mask):
-    """Push the children of a node with the chunks that reach it (a stack
-    entry: node << CHUNK_BITS | mask), the one to visit first on top; the new top."""
-    stack[top] = ((left + 1 if left_first else left) << CHUNK_BITS) | mask
-    stack[top + 1] = ((left if left_first else left + 1) << CHUNK_BITS) | mask
+def _push_children(stack, top, left, left_first, mask, hint):
+    """Push the children of a node with the chunks that reach it and the
+    chunk that hit it (an entry: node << NODE_SHIFT | hint << CHUNK_BITS |
+    mask), the one to visit first on top; the new top."""
+    low = (hint << CHUNK_BITS) | mask
+    stack[top] = ((left + 1 if left_first else left) << NODE_SHIFT) | low
+    stack[top + 1] = ((left if left_first else left + 1) << NODE_SHIFT) | low
     return top + 2
 
 
@@ -391,8 +402,9 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     top = 1
     while top > 0:
         top -= 1
-        i = stack[top] >> CHUNK_BITS
+        i = stack[top] >> NODE_SHIFT
         mask = stack[top] & ((1 << CHUNK_BITS) - 1)
+        hint = (stack[top] >> CHUNK_BITS) & 15
         n_visits += 1
         # the packet's frustum where it has one (tighter), else interval arithmetic
         if _frustum_misses(box, i, planes, n_planes) if n_planes > 0 else _ia_misses(box, i, ia):
@@ -400,14 +412,14 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
         c = node_i[i, COUNT]
         # inner nodes: up to the first chunk that hits; leaves: every chunk,
         # which the triangle tests then skip
-        mask = _chunks_hitting_box(ray, h_t, mask, box, i, c > 0)
+        mask, hint = _chunks_hitting_box(ray, h_t, mask, box, i, c > 0, hint)
         if mask == 0:
             continue
         if c <= 0:
             left = node_i[i, CHILD]
             if left < 0:
                 continue
-            top = _push_children(stack, top, left, sgn[-1 - c], mask)
+            top = _push_children(stack, top, left, sgn[-1 - c], mask, hint)
             continue
         n_leaves += 1
         ref0 = node_i[i, CHILD]
