@@ -44,7 +44,7 @@ the slab test's rounding by a few ulps), so rounding can only add a visit,
 never lose a hit.
 """
 import numpy as np
-from ._jit import helper, kernel
+from ._jit import flat_kernel, helper, kernel
 from .bvh_build import CHILD, COUNT
 from .counters import CANDIDATES, PACKETS, TESTS, VISITS
 from .triangle import ray_axes, woop_test
@@ -95,7 +95,7 @@ def _inv(d):
     return F1 / d if d != F0 else BIG
 
 
-@kernel
+@flat_kernel
 def set_inverse(ray, n):
     """Inverse directions of rays 0..n-1 (BIG for a zero component)."""
     for r in range(n):
@@ -104,7 +104,7 @@ def set_inverse(ray, n):
         ray[IZ, r] = _inv(ray[DZ, r])
 
 
-@kernel
+@flat_kernel
 def packet_bounds(ray, h_t, n, ia):
     """Interval-arithmetic bounds of the live rays: ia[0, a] / ia[1, a]
     origin range on axis a, ia[2, a] / ia[3, a] inverse-direction range,
@@ -118,8 +118,8 @@ def packet_bounds(ray, h_t, n, ia):
         ia[4, a] = F1
     ia[5, 0] = INF
     ia[5, 1] = -INF
-    pos = np.zeros(3, np.int64)
-    neg = np.zeros(3, np.int64)
+    px = py = pz = 0
+    nx = ny = nz = 0
     live = 0
     for r in range(n):
         if not h_t[r] >= ray[TMIN, r]:
@@ -127,25 +127,29 @@ def packet_bounds(ray, h_t, n, ia):
         live += 1
         for a in range(3):
             o = ray[OX + a, r]
-            d = ray[DX + a, r]
             i = ray[IX + a, r]
             ia[0, a] = min(ia[0, a], o)
             ia[1, a] = max(ia[1, a], o)
             ia[2, a] = min(ia[2, a], i)
             ia[3, a] = max(ia[3, a], i)
-            if d > F0:
-                pos[a] += 1
-            elif d < F0:
-                neg[a] += 1
         ia[5, 0] = min(ia[5, 0], ray[TMIN, r])
         ia[5, 1] = max(ia[5, 1], h_t[r])
+        dx, dy, dz = ray[DX, r], ray[DY, r], ray[DZ, r]
+        px += 1 if dx > F0 else 0
+        py += 1 if dy > F0 else 0
+        pz += 1 if dz > F0 else 0
+        nx += 1 if dx < F0 else 0
+        ny += 1 if dy < F0 else 0
+        nz += 1 if dz < F0 else 0
     for a in range(3):
-        uniform = (pos[a] == live) | (neg[a] == live)
+        pos = px if a == 0 else (py if a == 1 else pz)
+        neg = nx if a == 0 else (ny if a == 1 else nz)
+        uniform = (pos == live) | (neg == live)
         ia[4, a] = F1 if (uniform and live > 0 and np.isfinite(ia[0, a]) and np.isfinite(ia[1, a])) else F0
     return live
 
 
-@kernel
+@flat_kernel
 def packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes):
     """Planes (nx, ny, nz, d) with n . p + d >= 0 at every point of every
     live ray's [t_min, t_max] segment, rows 0..k-1; returns k (0: none, the
@@ -238,7 +242,7 @@ def packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes):
     return 5
 
 
-@kernel
+@flat_kernel
 def _plane_margins(planes, k, big):
     """planes[j, 4]: the culling margin of plane j (see packet_frustum)."""
     for j in range(k):
@@ -349,7 +353,7 @@ def _push_children(stack, top, left, left_first, mask, hint):
     return top + 2
 
 
-@kernel
+@flat_kernel
 def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
                 row):
     """Closest (or any) hits of packet rays 0..n-1 in `bvh`: on entry
@@ -475,7 +479,7 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     return True
 
 
-@kernel
+@flat_kernel
 def packet_axes(ray, h_t, n):
     """(live, kx, ky, kz, sx, sy, sz): how many rays are live; the Woop
     test's axis permutation for the whole packet; whether the packet's
@@ -513,7 +517,7 @@ def packet_axes(ray, h_t, n):
     return live, (kz + 1) % 3, (kz + 2) % 3, kz, sum_x >= F0, sum_y >= F0, sum_z >= F0
 
 
-@kernel
+@flat_kernel
 def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, counters, row):
     """One ray, Woop test with its own shear: (t, ref, b1, b2), ref -1 on a
     miss (t_max then). The reference the packets are checked against."""

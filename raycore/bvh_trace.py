@@ -5,7 +5,7 @@ by ray where a packet has no common shear axis; and the plain-Python
 wrappers the accelerator surface calls (accelerators.BvhAccel)."""
 import numpy as np
 
-from ._jit import helper, kernel
+from ._jit import flat_kernel, helper, kernel
 from .bvh_build import STACK, Bvh
 from .bvh_packets import (DX, DY, DZ, F0, F1, INF, N_ROWS, OX, OY, OZ, PACKET, SHARED_DIRECTION,
                           SHARED_ORIGIN, SINGLE, TMIN, set_inverse, trace_single, walk_packet)
@@ -187,7 +187,7 @@ def trace_light_samples(bvh, lights, rows, lifted, geo_n, smooth_n, mag, offset_
     return live
 
 
-@kernel
+@flat_kernel
 def trace_block_lights_into(bvh, lights, rows, n, lifted, geo_n, smooth_n, mag, offset_ulps, vis, counters, row,
                             ray, h_t, h_b1, h_b2, prim, ia, planes, stack, live):
     """trace_light_samples for one block's samples 0..n-1 (buffers of
