@@ -68,7 +68,8 @@ PACKET = 128
 LANES = 16
 N_CHUNKS = PACKET // LANES
 CHUNK_BITS = 8                   # a stack entry's low bits: its chunks (N_CHUNKS <= CHUNK_BITS)
-NODE_SHIFT = CHUNK_BITS + 4      # then the chunk that hit the parent (4 bits), then the node
+HINT_BITS = 4                    # then the chunk that hit the parent (N_CHUNKS <= 2^HINT_BITS), then the node
+NODE_SHIFT = CHUNK_BITS + HINT_BITS
 # rows of a packet's ray array (N_ROWS, PACKET), read-only while it walks;
 # PU, PV, PK: the origin permuted to the packet's axes, SU, SV, SZ: the
 # ray's shear (Woop). Hits go to separate arrays (h_t, h_b1, h_b2, prim): a store into
@@ -326,6 +327,9 @@ def _chunks_hitting_box(ray, h_t, mask, box, i, exact, hint):
     keeps it and every later one. Exact (leaves): every chunk is tested."""
     x0, y0, z0 = box[i, 0], box[i, 1], box[i, 2]
     x1, y1, z1 = box[i, 3], box[i, 4], box[i, 5]
+    # the inner nodes' search written apart from the leaves' loop: one loop
+    # serving both, with the exit inside, traced runner's captured shadow
+    # rays 2-5 % slower
     if not exact:
         if (mask >> hint) & 1:
             if _chunk_hits_box(ray, h_t, hint * LANES, x0, y0, z0, x1, y1, z1):
@@ -408,14 +412,14 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
         top -= 1
         i = stack[top] >> NODE_SHIFT
         mask = stack[top] & ((1 << CHUNK_BITS) - 1)
-        hint = (stack[top] >> CHUNK_BITS) & 15
+        hint = (stack[top] >> CHUNK_BITS) & ((1 << HINT_BITS) - 1)
         n_visits += 1
         # the packet's frustum where it has one (tighter), else interval arithmetic
         if _frustum_misses(box, i, planes, n_planes) if n_planes > 0 else _ia_misses(box, i, ia):
             continue
         c = node_i[i, COUNT]
-        # inner nodes: up to the first chunk that hits; leaves: every chunk,
-        # which the triangle tests then skip
+        # inner nodes: the parent's chunk, else up to the first chunk that
+        # hits; leaves: every chunk, which the triangle tests then skip
         mask, hint = _chunks_hitting_box(ray, h_t, mask, box, i, c > 0, hint)
         if mask == 0:
             continue

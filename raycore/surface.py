@@ -137,6 +137,15 @@ def run_loop_takes(found, r, runs, textured_scene, prim_out, tri_material, mater
 
 
 @helper
+def unit_or(sx, sy, sz, gx, gy, gz):
+    """(sx, sy, sz) made unit length, or (gx, gy, gz) where it is zero: the
+    smooth normal, for which the geometric one stands in."""
+    sl = np.sqrt(sx * sx + sy * sy + sz * sz)
+    inv = F1 / sl if sl > F0 else F0
+    return (sx * inv, sy * inv, sz * inv) if sl > F0 else (gx, gy, gz)
+
+
+@helper
 def lift_corner(px, py, pz, side, w, cx, cy, cz, nx, ny, nz, qx, qy, qz, sx, sy, sz):
     """Corner (cx, cy, cz), of barycentric weight w and vertex normal
     (nx, ny, nz) turned by `side`: its term of the lift toward the smooth
@@ -266,9 +275,7 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                                                      qx, qy, qz, sx, sy, sz)
                 qx, qy, qz, sx, sy, sz = lift_corner(px, py, pz, side, b2, v2x, v2y, v2z, n2x, n2y, n2z,
                                                      qx, qy, qz, sx, sy, sz)
-                sl = np.sqrt(sx * sx + sy * sy + sz * sz)
-                inv = F1 / sl if sl > F0 else F0
-                sx, sy, sz = (sx * inv, sy * inv, sz * inv) if sl > F0 else (gx, gy, gz)
+                sx, sy, sz = unit_or(sx, sy, sz, gx, gy, gz)
                 lx, ly, lz = px + qx, py + qy, pz + qz
                 store3(point, iu, px, py, pz)
                 store3(lifted, iu, lx, ly, lz)
@@ -325,9 +332,7 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
                                                          tri_verts[pu, 3 * c + 1], tri_verts[pu, 3 * c + 2],
                                                          normals[v, 0], normals[v, 1], normals[v, 2],
                                                          qx, qy, qz, sx, sy, sz)
-            sl = np.sqrt(sx * sx + sy * sy + sz * sz)
-            inv = F1 / sl if sl > F0 else F0
-            sx, sy, sz = (sx * inv, sy * inv, sz * inv) if sl > F0 else (gx, gy, gz)
+            sx, sy, sz = unit_or(sx, sy, sz, gx, gy, gz)
             lx, ly, lz = px + qx, py + qy, pz + qz
             store3(point, iu, px, py, pz)
             store3(lifted, iu, lx, ly, lz)
