@@ -91,8 +91,19 @@ class FrameBuffers:
         self.next_image = (k + 1) % len(self.images)
         if self.images[k] is None:
             W, H = self.size[:2]
-            self.images[k] = (np.empty((H * W, 4), np.float32), np.empty(H * W, np.float32))
+            self.images[k] = (aligned_empty((H * W, 4)), aligned_empty(H * W))
         return self.images[k]
+
+
+def aligned_empty(shape, dtype=np.float32, align=64):
+    """np.empty whose data starts at a multiple of `align` bytes: the block
+    write's streaming stores (shade.write_block) need its rows on 32-byte
+    boundaries, and numpy's large arrays start 16 bytes past one."""
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape)) * dtype.itemsize
+    raw = np.empty(nbytes + align, np.uint8)
+    skip = (-raw.ctypes.data) % align
+    return raw[skip:skip + nbytes].view(dtype).reshape(shape)
 
 
 def light_groups(lights, lit):

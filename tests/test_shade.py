@@ -1,5 +1,6 @@
 """Texture lookup: texel centres exact, bilinear between them, wrap-around."""
 import numpy as np
+import pytest
 
 from raycore.surface import bilinear
 
@@ -175,3 +176,45 @@ def test_image_ring_keeps_a_frame_until_the_ring_comes_round():
     cfg4 = RenderConfig(width=48, height=40, packet=8, spp=4)
     multi = render_frame(geom, shading, poses[0], cfg4, buffers)
     np.testing.assert_allclose(multi.rgba, render_frame(geom, shading, poses[0], cfg4).rgba, atol=1e-6)
+
+
+@pytest.mark.parametrize("width, offset", [(96, 0), (88, 0), (96, 1), (84, 0), (77, 0)],
+                         ids=["streamed", "streamed, edge blocks 24 wide", "image 4 bytes past alignment",
+                              "width not a multiple of 8", "odd width"])
+def test_the_block_write_paints_every_pixel_of_its_block(width, offset):
+    """write_block's overwriting pass, every block of an image: samples where
+    the block has them, the background elsewhere, pixels outside the block
+    untouched, the same bits whether the rows went out by streaming stores
+    (an image on 64-byte boundaries, widths a multiple of 8) or by plain
+    stores (the image off a 32-byte boundary, other widths)."""
+    from raycore.frame import aligned_empty
+    from raycore.shade import write_block
+    rng = np.random.default_rng(5)
+    height, block = 70, 32
+    bg = np.array([0.1, 0.2, 0.3], np.float32)
+    raw_rgba = aligned_empty(((width * height + 1) * 4,))
+    raw_z = aligned_empty((width * height + 1,))
+    rgba = raw_rgba[4 * offset:4 * offset + 4 * width * height].reshape(-1, 4)
+    z = raw_z[offset:offset + width * height]
+    assert (rgba.ctypes.data % 64 == 0) == (offset == 0)
+    want_rgba = np.full_like(rgba, 7.0)
+    want_z = np.full_like(z, 7.0)
+    for y0 in range(0, height, block):
+        for x0 in range(0, width, block):
+            rgba[:] = 7.0
+            z[:] = 7.0
+            ys, xs = np.mgrid[y0:min(y0 + block, height), x0:min(x0 + block, width)]
+            pix = (ys * width + xs).reshape(-1)
+            hit = rng.random(pix.size) < (0.0 if (x0, y0) == (0, 0) else 0.6)     # one block without samples
+            pixel = pix[hit].astype(np.int32)                                     # row-major, as the gather
+            n = pixel.size
+            rgb = rng.random((3, block * block)).astype(np.float32)
+            depth = rng.random(block * block).astype(np.float32)
+            write_block(pixel, rgb, depth, np.int64(n), np.int64(x0), np.int64(y0), np.int64(block),
+                        np.int64(width), bg, np.float32(1.0), False, rgba, z)
+            want_rgba[:] = 7.0
+            want_z[:] = 7.0
+            want_rgba[pix, :3], want_rgba[pix, 3], want_z[pix] = bg, 0.0, np.inf
+            want_rgba[pixel, :3], want_rgba[pixel, 3], want_z[pixel] = rgb[:, :n].T, 1.0, depth[:n]
+            np.testing.assert_array_equal(rgba, want_rgba)
+            np.testing.assert_array_equal(z, want_z)
