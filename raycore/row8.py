@@ -16,11 +16,17 @@ from numba.extending import intrinsic
 V8 = ir.VectorType(ir.FloatType(), 8)
 
 
+def vector_pointer(context, builder, aryty, ary_val, indices):
+    """Pointer to the element at `indices` of an array (8 contiguous float32
+    from there on), as <8 x float>*."""
+    ary = context.make_array(aryty)(context, builder, ary_val)
+    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, indices)
+    return builder.bitcast(ptr, V8.as_pointer())
+
+
 def _row_ptr(context, builder, aryty, ary_val, row):
     """Pointer to row `row` of a 2-d array (rows of >= 8 contiguous float32), as <8 x float>*."""
-    ary = context.make_array(aryty)(context, builder, ary_val)
-    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [row, ir.Constant(ir.IntType(64), 0)])
-    return builder.bitcast(ptr, V8.as_pointer())
+    return vector_pointer(context, builder, aryty, ary_val, [row, ir.Constant(ir.IntType(64), 0)])
 
 
 @intrinsic

@@ -171,6 +171,15 @@ def write_pixels(pixel, rgb, depth, bg, weight, accumulate, out_rgba, out_z):
 
 
 @helper
+def _put_sample4(dst, q, rgb, i):
+    """dst[q:q + 4] = sample i's colour and alpha 1 (flat RGBA rows)."""
+    dst[q] = rgb[0, i]
+    dst[q + np.uint64(1)] = rgb[1, i]
+    dst[q + np.uint64(2)] = rgb[2, i]
+    dst[q + np.uint64(3)] = F1
+
+
+@helper
 def _streamed_rows(pixel, rgb, depth, n, x0, y0, m, block, width, height, bg, flat, out_z):
     """write_block's overwriting pass when every row of the block can go out
     by streaming stores (see there). The row buffers are made here, not
@@ -196,11 +205,7 @@ def _streamed_rows(pixel, rgb, depth, n, x0, y0, m, block, width, height, bg, fl
         end = p0 + m
         while i < n_u and np.uint64(pixel[i]) < end:
             k = np.uint64(pixel[i]) - p0
-            q = k * four
-            row_rgba[q] = rgb[0, i]
-            row_rgba[q + np.uint64(1)] = rgb[1, i]
-            row_rgba[q + np.uint64(2)] = rgb[2, i]
-            row_rgba[q + np.uint64(3)] = F1
+            _put_sample4(row_rgba, k * four, rgb, i)
             row_z[k] = depth[i]
             i += np.uint64(1)
         for c in range(np.uint64(0), four * m, eight):
@@ -226,12 +231,11 @@ def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumula
     place and the samples written over them (4.1-6.3 -> 2.7-2.8 ms on hand
     against one pass choosing per pixel, 2026-12-04; composed rows copied
     out by plain stores took twice as long). A plain store reads its line
-    from memory first,
-    and the 20 MB of a 1024^2 frame's RGBA and Z are written once and not
-    read again by the frame: streamed, they do not pass through the caches.
-    Captured hits, one thread, cycles a visible sample: demo 11-12 -> 7-9,
-    hand 13-16 -> 8-9, toys 9-12 -> 6-8 (the gather a little faster too).
-    Accumulating, one pass over the pixels
+    from memory first, and the 20 MB of a 1024^2 frame's RGBA and Z are
+    written once and not read again by the frame: streamed, they do not
+    pass through the caches. Captured hits, one thread, cycles a visible
+    sample: demo 11-12 -> 7-9, hand 13-16 -> 8-9, toys 9-12 -> 6-8 (the
+    gather a little faster too). Accumulating, one pass over the pixels
     stays (each pixel's background weight is added once, as its samples
     are)."""
     height = out_z.shape[0] // width
@@ -257,11 +261,7 @@ def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumula
         for i in range(n):
             iu = np.uint64(i)
             p = np.uint64(pixel[iu])
-            q = p * four
-            flat[q] = rgb[0, iu]
-            flat[q + np.uint64(1)] = rgb[1, iu]
-            flat[q + np.uint64(2)] = rgb[2, iu]
-            flat[q + np.uint64(3)] = F1
+            _put_sample4(flat, p * four, rgb, iu)
             out_z[p] = depth[iu]
         return
     i = 0

@@ -13,17 +13,11 @@ caller's later stores are. On other CPUs they are plain stores.
 import llvmlite.binding as llvm
 from llvmlite import ir
 from numba import types
-from numba.core import cgutils
 from numba.extending import intrinsic
 
-V8 = ir.VectorType(ir.FloatType(), 8)
+from .row8 import vector_pointer
+
 X86 = llvm.get_process_triple().startswith(("x86_64", "i686", "i386"))
-
-
-def _elem_ptr(context, builder, aryty, ary_val, i):
-    ary = context.make_array(aryty)(context, builder, ary_val)
-    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [i])
-    return builder.bitcast(ptr, V8.as_pointer())
 
 
 @intrinsic
@@ -34,8 +28,8 @@ def stream8(typingctx, dst, i, src, k):
 
     def codegen(context, builder, signature, args):
         d_ty, _, s_ty, _ = signature.args
-        pd = _elem_ptr(context, builder, d_ty, args[0], args[1])
-        ps = _elem_ptr(context, builder, s_ty, args[2], args[3])
+        pd = vector_pointer(context, builder, d_ty, args[0], [args[1]])
+        ps = vector_pointer(context, builder, s_ty, args[2], [args[3]])
         v = builder.load(ps, align=4)
         st = builder.store(v, pd, align=32)
         if X86:
