@@ -234,7 +234,7 @@ def write_block(pixel, rgb, depth, n, x0, y0, block, width, bg, weight, accumula
     from memory first, and the 20 MB of a 1024^2 frame's RGBA and Z are
     written once and not read again by the frame: streamed, they do not
     pass through the caches. Captured hits, one thread, cycles a visible
-    sample: demo 11-12 -> 7-9, hand 13-16 -> 8-9, toys 9-12 -> 6-8 (the
+    sample: demo 11-12 -> 7-8, hand 12-15 -> 8-9, toys 9-12 -> 6-8 (the
     gather a little faster too). Accumulating, one pass over the pixels
     stays (each pixel's background weight is added once, as its samples
     are)."""

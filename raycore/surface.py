@@ -185,8 +185,10 @@ def fill_block(cam, jx, jy, hit_prim, hit_b1, hit_b2, hit_t, row_off, col_off, b
     an element on this machine kind, but on a short run the run loop's
     scalar remainder costs more. Per visible sample, one thread, captured
     frames: demo 84 -> 55 cycles, toys 83 -> 53, hand 77 -> 63, runner
-    90 -> 78, torus (short runs, no texture) 54 -> 61-65. The two loops are written out here, not
-    as helpers: inlined, they compiled ~1 s longer."""
+    90 -> 78, torus (short runs, no texture) 54 -> 61-65; since found's
+    rows are read at unsigned indices (2026-12-05), demo 47-49, toys 45-48,
+    hand 55-58, torus 54-60. The two loops are written out here, not as
+    helpers: inlined, they compiled ~1 s longer."""
     width = col_off.shape[0]
     height = row_off.shape[0]
     n = 0

@@ -197,8 +197,6 @@ def test_the_block_write_paints_every_pixel_of_its_block(width, offset):
     rgba = raw_rgba[4 * offset:4 * offset + 4 * width * height].reshape(-1, 4)
     z = raw_z[offset:offset + width * height]
     assert (rgba.ctypes.data % 64 == 0) == (offset == 0)
-    want_rgba = np.full_like(rgba, 7.0)
-    want_z = np.full_like(z, 7.0)
     for y0 in range(0, height, block):
         for x0 in range(0, width, block):
             rgba[:] = 7.0
@@ -212,8 +210,8 @@ def test_the_block_write_paints_every_pixel_of_its_block(width, offset):
             depth = rng.random(block * block).astype(np.float32)
             write_block(pixel, rgb, depth, np.int64(n), np.int64(x0), np.int64(y0), np.int64(block),
                         np.int64(width), bg, np.float32(1.0), False, rgba, z)
-            want_rgba[:] = 7.0
-            want_z[:] = 7.0
+            want_rgba = np.full_like(rgba, 7.0)
+            want_z = np.full_like(z, 7.0)
             want_rgba[pix, :3], want_rgba[pix, 3], want_z[pix] = bg, 0.0, np.inf
             want_rgba[pixel, :3], want_rgba[pixel, 3], want_z[pixel] = rgb[:, :n].T, 1.0, depth[:n]
             np.testing.assert_array_equal(rgba, want_rgba)
