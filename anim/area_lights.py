@@ -4,7 +4,7 @@ An area light is `samples` isotropic point emitters, each with 1/samples of
 its intensity, spread evenly over a rectangle (corner + u edge_u + v edge_v)
 or over the surface of a sphere (center, radius), the same for every pixel,
 so that emitter k's shadow rays are one coherent set of light-space packets
-(shadow_rays.py, as for a point light).
+(geometry/light_rays.py, as for a point light).
 
 The points are centred on the light for every count (emitter_uv): pairs
 mirrored through the centre (a point of the (0, 2)-sequence in one half,
@@ -12,7 +12,7 @@ its image in the other; on a sphere, antipodes), and the centre itself when
 the count is odd, so that one sample is the point light at the centre and
 no count shifts the shadow. The Halton sequence used before started at
 (1/2, 1/3): one sample sat 1/6 of edge_v off the centre, and the centroid of
-4 was (0.41, 0.39) (issue 20). The pairs come first, and every prefix of
+4 was (0.41, 0.39). The pairs come first, and every prefix of
 them spreads over the whole light, so the first emitters serve as probes
 of it (render.light_probes, frame.py).
 
@@ -20,16 +20,16 @@ Radiance: a surface point receives sum_k (I / N) color max(0, n.l_k) / d_k^2
 times the visibility of emitter k. As the light shrinks, every emitter
 moves to one point and the sum becomes that point light's exactly; as N
 grows it converges to the integral over the light of the same isotropic
-emission (tests/test_area_lights.py checks both).
+emission (tests/render/test_area_lights.py checks both).
 """
 import numpy as np
 
-from raycore.sampling import sample_offset
+from raycore.geometry.sampling import sample_offset
 
 
 def emitter_uv(n: int) -> np.ndarray:
     """(n, 2) points of the unit square whose centroid is (1/2, 1/2): the
-    pixel sampler's mirrored pairs (raycore.sampling.sample_offset 1..2p),
+    pixel sampler's mirrored pairs (raycore.geometry.sampling.sample_offset 1..2p),
     then the centre if n is odd. For n = 1, the centre."""
     pairs = [sample_offset(i) for i in range(1, 2 * (n // 2) + 1)]
     return np.array(pairs + [(0.5, 0.5)] * (n % 2), np.float64).reshape(n, 2)

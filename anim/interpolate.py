@@ -33,7 +33,7 @@ smooth method and blow up the neighbouring segments.
 """
 import numpy as np
 
-from .vertex_kernels import horner_into
+from anim.vertex_kernels import horner_into
 
 METHODS = ("linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
            "pchip", "akima", "makima")
@@ -110,7 +110,7 @@ def _piece_coeffs(times, values, method):
         mu = _parabola_tangents(du, (p1 - p0) / du)      # d/du at each key
         return _hermite(p0, p1, mu[:-1] * du / h, mu[1:] * du / h, h)
     # scipy.interpolate is imported here, by the scenes that use it: its
-    # import is ~0.4 s of every start-up otherwise (issue 21)
+    # import is ~0.4 s of every start-up otherwise
     from scipy.interpolate import Akima1DInterpolator, CubicSpline, PchipInterpolator
     if method in _SCIPY_SPLINE_BC:
         poly = CubicSpline(times, values, axis=0, bc_type=_SCIPY_SPLINE_BC[method])

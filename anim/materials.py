@@ -1,7 +1,7 @@
 """Material dicts as anim/scene.py keeps them (diffuse, specular, shininess,
 texture, texture_space): the default material, and metallic-roughness
 materials (glTF's pbrMetallicRoughness, USD's UsdPreviewSurface) as
-frustrace's Lambert + Blinn-Phong ones (raycore/shade.py).
+frustrace's Lambert + Blinn-Phong ones (raycore/shading/shade.py).
 
 One mapping for both formats: the base colour is the diffuse colour; the
 roughness r becomes the Blinn-Phong exponent of the same Beckmann width,

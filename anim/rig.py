@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from raycore._jit import kernel
+from raycore.jit.presets import kernel
 
-from .errors import SceneError
-from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks, quat_to_matrix
-from .tracks import AngleCurve, rotation_curve, vector_curve
+from anim.errors import SceneError
+from anim.track_kernels import pack_rotation_tracks, pack_vector_tracks, quat_to_matrix, tracks_at
+from anim.tracks import AngleCurve, rotation_curve, vector_curve
 
 NO_ROTATION, EULER, QUATERNION, MATRIX = 0, 1, 2, 3
 
@@ -49,7 +49,7 @@ def _pose(kind, euler, axes, intrinsic, quat, matrix, trans, origin, parent, out
             quat_to_matrix(quat[j, 0], quat[j, 1], quat[j, 2], quat[j, 3], r)
         elif kind[j] == MATRIX:
             for a in range(3):    # element by element: a block copy compiles numba's
-                for b in range(3):    # shape-mismatch message (~2 s, issue 21)
+                for b in range(3):    # shape-mismatch message (~2 s)
                     r[a, b] = matrix[j, a, b]
         p = parent[j]
         off = np.empty(3)
@@ -161,13 +161,8 @@ class Skeleton:
     def matrices(self, t):
         """(J, 3, 4) float64 skinning matrices at time t."""
         n = len(self.parent)
-        euler, quat, trans = np.empty((n, 3)), np.empty((n, 4)), np.empty((n, 3))
-        eval_vectors(t, *self.packed_angles, euler)
-        eval_slerp(t, *self.packed_quats, quat)
-        eval_vectors(t, *self.packed_trans, trans)
-        matrix = np.zeros((n, 3, 3))
-        for j in self.scipy_joints:
-            matrix[j] = self.rotation[j](t)
+        (euler, trans), quat, matrix = tracks_at(t, n, (self.packed_angles, self.packed_trans), self.packed_quats,
+                                                 {j: self.rotation[j] for j in self.scipy_joints})
         out = np.empty((n, 3, 4))
         _pose(self.kind, euler, self.axes, self.intrinsic, quat, matrix, trans, self.origin, self.parent, out)
         return out

@@ -10,9 +10,9 @@ interpolation are evaluated by scipy per object and passed in.
 import numpy as np
 from numba import prange
 
-from raycore._jit import kernel, parallel_arith_kernel
+from raycore.jit.presets import kernel, parallel_arith_kernel
 
-from .track_kernels import eval_slerp, eval_vectors, pack_rotation_tracks, pack_vector_tracks, quat_to_matrix
+from anim.track_kernels import pack_rotation_tracks, pack_vector_tracks, quat_to_matrix, tracks_at
 
 
 @kernel
@@ -62,13 +62,8 @@ class RigidBatch:
     def matrices(self, t):
         """(n_objects, 3, 4) float64 transforms at time t."""
         n = len(self.objects)
-        trans, scale, quat = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 4))
-        eval_vectors(t, *self.translation, trans)
-        eval_vectors(t, *self.scale, scale)
-        eval_slerp(t, *self.rotation, quat)
-        rot = np.zeros((n, 3, 3))
-        for i in self.python_rotation:
-            rot[i] = self.objects[i].rotation(t)
+        (trans, scale), quat, rot = tracks_at(t, n, (self.translation, self.scale), self.rotation,
+                                              {i: self.objects[i].rotation for i in self.python_rotation})
         mats = np.empty((n, 3, 4))
         _compose(quat, scale, trans, self.use_matrix, rot, mats)
         return mats

@@ -13,17 +13,17 @@ import numpy as np
 import yaml
 from pydantic import ValidationError
 
-from .area_lights import emitter_positions
-from .errors import SceneError
-from .interpolate import Curve
-from .materials import DEFAULT_MATERIAL
-from .mesh_io import load_mesh, vertex_lines
-from .rig import Skeleton
-from .rigid_batch import RigidBatch
-from .schema import SceneFile, parse_scene
-from .usd import UsdObject, is_usd, scene_of_stage
-from .tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
-from .vertex_kernels import skin_into, transform_into
+from anim.area_lights import emitter_positions
+from anim.errors import SceneError
+from anim.interpolate import Curve
+from anim.materials import DEFAULT_MATERIAL
+from anim.io.mesh_io import load_mesh, vertex_lines
+from anim.rig import Skeleton
+from anim.rigid_batch import RigidBatch
+from anim.schema import SceneFile, parse_scene
+from anim.io.usd import UsdObject, is_usd, scene_of_stage
+from anim.tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
+from anim.vertex_kernels import skin_into, transform_into
 
 
 def _key_path(loc):
@@ -139,7 +139,7 @@ class SceneObject:
                 if self.curve.constant:
                     self.curve = None
         elif spec.mesh.lower().endswith((".gltf", ".glb")):
-            from .gltf import GltfObject          # pygltflib only for scenes with glTF files
+            from anim.io.gltf import GltfObject          # pygltflib only for scenes with glTF files
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
                                    warnings)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
@@ -469,7 +469,7 @@ class AnimatedScene:
 
     @property
     def light_table(self):
-        """(n, 8) f32 rows for raycore/shade.py: kind (0 point, 1 directional),
+        """(n, 8) f32 rows for raycore/shading/shade.py: kind (0 point, 1 directional),
         position or direction, colour x intensity; an area light gives one
         point row per emitter, each with 1/samples of its intensity."""
         rows = []

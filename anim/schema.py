@@ -20,12 +20,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from raycore.config import PACKET_SIZES
 
-from .usd import USD_SUFFIXES
+from anim.io.usd import USD_SUFFIXES
 
 # coordinates and colours stay inside float32 with room for arithmetic (anim/tracks.py)
 Coord = Annotated[float, Field(ge=-1e37, le=1e37)]
 Vec3 = Tuple[Coord, Coord, Coord]
-# colours are linear RGB: no negative light or reflectance (issue 20: they gave negative pixels)
+# colours are linear RGB: no negative light or reflectance (they gave negative pixels)
 Channel = Annotated[float, Field(ge=0, le=1e37)]
 Colour = Tuple[Channel, Channel, Channel]
 Interp = Literal["linear", "catmull-rom", "centripetal", "cubic", "natural", "clamped",
@@ -62,7 +62,7 @@ class Output(Strict):
     path: str = "out/frame_####.exr"
     resolution: Tuple[Annotated[int, Field(gt=0, le=16384)], Annotated[int, Field(gt=0, le=16384)]] = (512, 512)
     aovs: List[Literal["N", "P", "id"]] = []
-    # EXR codec (raycore/image_io.COMPRESSIONS); zip is lossless and measured fastest
+    # EXR codec (raycore/images/image_io.COMPRESSIONS); zip is lossless and measured fastest
     compression: Literal["none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa",
                          "dwab", "zstd", "htj2k256", "htj2k32"] = "zip"
 

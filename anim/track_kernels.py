@@ -5,7 +5,7 @@ shortest-arc slerp), float64. Rotation splines stay with scipy (Python).
 """
 import numpy as np
 
-from raycore._jit import kernel
+from raycore.jit.presets import kernel
 
 
 def pack_vector_tracks(curves, default):
@@ -56,7 +56,7 @@ def eval_vectors(t, times, coeffs, last, key_start, seg_start, loop, out):
         k, s, past_end = _segment(times, key_start[o], key_start[o + 1], t, loop[o])
         if past_end:
             for d in range(3):     # element by element: a row copy compiles numba's
-                out[o, d] = last[o, d]   # shape-mismatch message code (~1.5 s, issue 21)
+                out[o, d] = last[o, d]   # shape-mismatch message code (~1.5 s)
             continue
         c = coeffs[seg_start[o] + k]
         for d in range(3):
@@ -127,3 +127,22 @@ def pack_rotation_tracks(curves):
         key_start.append(key_start[-1] + len(times[-1]))
     return (np.concatenate(times).astype(np.float64), np.concatenate(quats).astype(np.float64),
             np.array(key_start, np.int64), np.array(loop), python)
+
+
+def tracks_at(t, n, vector_tracks, rotation_track, python_rotations):
+    """n objects' (or joints') tracks at time t: a (n, 3) float64 array per
+    packed vector track (pack_vector_tracks), the (n, 4) quaternions of the
+    packed rotation track (pack_rotation_tracks), and (n, 3, 3) rotation
+    matrices, zero but for python_rotations {i: t -> (3, 3)} (rotations a
+    packed track cannot hold: scipy splines)."""
+    vectors = []
+    for packed in vector_tracks:
+        out = np.empty((n, 3))
+        eval_vectors(t, *packed, out)
+        vectors.append(out)
+    quat = np.empty((n, 4))
+    eval_slerp(t, *rotation_track, quat)
+    matrix = np.zeros((n, 3, 3))
+    for i, rotation in python_rotations.items():
+        matrix[i] = rotation(t)
+    return vectors, quat, matrix

@@ -3,8 +3,8 @@
 quaternions that were not unit length are normalised with a warning."""
 import numpy as np
 
-from .errors import SceneError
-from .interpolate import METHODS, Curve, RotationCurve, normalized_quaternions
+from anim.errors import SceneError
+from anim.interpolate import METHODS, Curve, RotationCurve, normalized_quaternions
 
 
 # largest keyed value accepted: float32 ends at 3.4e38, and a value is still

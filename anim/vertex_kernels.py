@@ -4,7 +4,7 @@ blend skinning. Parallel over vertices, float64 arithmetic (keys may sit at
 import numpy as np
 from numba import prange
 
-from raycore._jit import parallel_arith_kernel
+from raycore.jit.presets import parallel_arith_kernel
 
 
 @parallel_arith_kernel

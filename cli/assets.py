@@ -29,7 +29,7 @@ def render_preview(anim_yaml: Path, png_path: Path, size: int = 320):
     from anim.render.renderer import SceneRenderer
     from anim.render.settings import config_of, shading_of
     from anim.scene import AnimatedScene
-    from raycore.image_io import exr_to_png, write_exr
+    from raycore.images.image_io import exr_to_png, write_exr
 
     scene = AnimatedScene(anim_yaml)
     frames = scene.frame_numbers

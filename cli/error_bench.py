@@ -5,7 +5,7 @@ from pathlib import Path
 
 from rich.table import Table
 
-from .report import Console
+from cli.report import Console
 
 
 def print_report(report):

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+import raycore
 from anim.errors import SceneError
 from raycore.config import ACCELS, PACKET_SIZES
 
@@ -124,7 +125,7 @@ class Group(click.Group):
 
 
 @click.group(cls=Group, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option("0.1.0", prog_name="frustrace")
+@click.version_option(raycore.__version__, prog_name="frustrace")
 def main():
     """frustrace: a frustum-packet ray caster for keyframed mesh animations.
 
@@ -246,9 +247,9 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
     from anim.render.frame_files import frame_path
     from anim.render.job import RenderJob, render_animation
     from anim.render.settings import config_of, one_pass_blur_warning
-    from raycore._jit import set_threads
+    from raycore.jit.presets import set_threads
 
-    from .report import progress, summary_table
+    from cli.report import progress, summary_table
 
     scene = load_scene(anim_yaml, camera)
     spec = scene.spec
@@ -287,7 +288,7 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
     if preview_path:
         from anim.render.paths import writable_file
 
-        from .preview import FORMATS
+        from cli.preview import FORMATS
         writable_file(preview_path, "the --preview animation", FORMATS)
     client = cluster = None
     if workers or scheduler:
@@ -311,7 +312,7 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
     if preview_path:
         from anim.render.frame_files import frame_file
 
-        from .preview import write_animation
+        from cli.preview import write_animation
         n = write_animation([frame_file(scene, out_dir, f) for f in frames], preview_path, spec.frames.fps)
         if not quiet:
             click.echo(f"wrote {preview_path} ({n} frames)")
@@ -377,9 +378,9 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
 
     from anim.measure.bench import SCENE_NAMES, run_bench
     from anim.render.paths import writable_file
-    from raycore._jit import set_threads
+    from raycore.jit.presets import set_threads
 
-    from .report import bench_table
+    from cli.report import bench_table
     res = res if res else (None if error_report else 1024)
     names = list(SCENE_NAMES) if scenes == "all" else [s.strip() for s in scenes.split(",") if s.strip()]
     if not names:
@@ -400,7 +401,7 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
         from anim.measure.error_study import run_error_report
         from anim.measure.image_error import RES as IMAGE_STUDY_RES
 
-        from .error_bench import print_report, write_report
+        from cli.error_bench import print_report, write_report
         from anim import builtin
         if not any(n in builtin.SCENES for n in names):     # before minutes of work, not after
             raise click.BadParameter(f"none of these scenes knows its exact motion; --error takes "
@@ -430,7 +431,7 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
                      peer_list, shadow_list)
     bench_table(rows)
     if plot_path:
-        from .bench import plot_phases
+        from cli.bench import plot_phases
         plot_phases(rows, plot_path)
         click.echo(f"wrote {plot_path}")
     if json_path:
@@ -459,9 +460,9 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
     from anim.measure.compare import compare as run_compare
     from anim.measure.compare import parse_structures
     from anim.render.paths import writable_file
-    from raycore._jit import set_threads
+    from raycore.jit.presets import set_threads
 
-    from .report import compare_table
+    from cli.report import compare_table
     if json_path:
         writable_file(json_path, "the --json file")
     try:
@@ -497,7 +498,7 @@ def assets():
 @assets.command("list")
 def assets_list():
     """Name, triangle count (and the classic scene's) and motion of each scene."""
-    from .assets import scene_rows
+    from cli.assets import scene_rows
     for r in scene_rows():
         classic = f"(classic scene: {r['target']:,d})" if r["target"] else ""
         click.echo(f"{r['name']:8s} {r['triangles']:>7,d} triangles {classic:24s} {r['description']}")
@@ -516,7 +517,7 @@ def assets_make(name, out_dir, preview_path, overwrite):
     from anim.errors import SceneError
     from anim.render.paths import PREVIEW_FORMATS, writable_dir, writable_file
 
-    from .assets import make, render_preview
+    from cli.assets import make, render_preview
     if name not in builtin.ALL:
         raise click.BadParameter(f"unknown scene {name!r}; built-in: {', '.join(builtin.ALL)}",
                                  param_hint="NAME")

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raycore.image_io import linear_to_srgb, read_exr
+from raycore.images.image_io import linear_to_srgb, read_exr
 
 MAX_SIDE = 640
 FORMATS = (".gif", ".webp")

@@ -55,7 +55,7 @@ def fitted_table(title, columns, rows, width) -> Table:
     column is at least as wide as its widest cell (headers fold at spaces),
     and while the table is too wide the columns with the lowest keep rank
     are left out (rank None: always kept), said in the caption. rich alone
-    shrank cells to "de…" and numbers to "0.…" (issue 20).
+    shrank cells to "de…" and numbers to "0.…".
     columns: [(header, rank)]; rows: lists of cell strings."""
     natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]
     need = [max([len(w) for w in h.split()] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]

@@ -4,14 +4,14 @@ arguments and the same results, so that the frame (frame.py) picks its
 structure once and never asks which one it has.
 
   GridAccel  the per-frame uniform grid: camera packets by Coherent Grid
-             Traversal (grid_drivers.py), shadow rays in light-space packets
-             (shadow_rays.py), ray batches in packets;
+             Traversal (grid/drivers.py), shadow rays in light-space packets
+             (geometry/light_rays.py), ray batches in packets;
   KdAccel    the SAH kd-tree: camera packets by MLRTA frustum traversal,
-             shadow rays and batches one by one (kdtree_packets.py, kdtree_rays.py);
+             shadow rays and batches one by one (kdtree/packets.py, kdtree/rays.py);
   BvhAccel   the per-frame BVH (refit trees per object under a top level,
-             scene_bvh.py): every kind of ray in packets (8x8 camera rays, 128
+             bvh/scene.py): every kind of ray in packets (8x8 camera rays, 128
              shadow or batch rays) that share an
-             origin or a direction (bvh_packets.py, bvh_trace.py).
+             origin or a direction (bvh/packets.py, bvh/trace.py).
 
 Counters are named (counters.Counters): `visits` are grid cells or tree
 nodes, and `candidates` are triangles surviving the grid's culling or the
@@ -19,22 +19,22 @@ leaves a tree's packets reached.
 """
 import numpy as np
 
-from .bvh_build import Bvh
-from .bvh_trace import bvh_light_visibility, bvh_sample_visibility, bvh_trace_camera, bvh_trace_rays
-from .counters import Counters
-from .grid_build import Grid
-from .kdtree_build import KdTree
-from .kdtree_packets import kd_trace_camera
-from .kdtree_rays import kd_light_visibility, kd_trace_rays
-from .trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera, trace_rays
-from .workspace import scratch
+from raycore.bvh.nodes import Bvh
+from raycore.bvh.trace import bvh_light_visibility, bvh_sample_visibility, bvh_trace_camera, bvh_trace_rays
+from raycore.jit.counters import Counters
+from raycore.grid.build import Grid
+from raycore.kdtree.build import KdTree
+from raycore.kdtree.packets import kd_trace_camera
+from raycore.kdtree.rays import kd_light_visibility, kd_trace_rays
+from raycore.grid.trace import Hits, camera_buffers, light_visibility, row_major_offsets, trace_camera, trace_rays
+from raycore.jit.workspace import scratch
 
 # the kd-tree's camera packets are always KD_PACKET^2 rays
 KD_PACKET = 8
 
 
 class GridAccel:
-    """The uniform grid of this frame (grid_build.Grid) over tri_verts."""
+    """The uniform grid of this frame (grid/build.Grid) over tri_verts."""
     name = "grid"
 
     def __init__(self, grid: Grid, tri_verts, packet: int, cull=True, buffers=None):
@@ -50,7 +50,7 @@ class GridAccel:
         return hits._replace(counters=Counters.of(hits.counters)), (self.buffers.row_off, self.buffers.col_off)
 
     def trace_shadows(self, rays, vis) -> Counters:
-        """vis[i] = 1 where shadow ray i (shadow_rays.LightRays) reaches its light, else 0."""
+        """vis[i] = 1 where shadow ray i (geometry/light_rays.LightRays) reaches its light, else 0."""
         _, c = light_visibility(self.grid, self.tri_verts, rays, vis, cull=self.cull)
         return Counters.of(c)
 
@@ -60,7 +60,7 @@ class GridAccel:
 
 
 class KdAccel:
-    """An SAH kd-tree (kdtree_build.KdTree) over tri_verts."""
+    """An SAH kd-tree (kdtree/build.KdTree) over tri_verts."""
     name = "kdtree"
     packet = KD_PACKET
 
@@ -87,7 +87,7 @@ def packet_of(accel: str, grid_packet: int) -> int:
 
 
 class BvhAccel:
-    """The frame's BVH (bvh_build.Bvh, kept by scene_bvh.SceneBvh) over tri_verts."""
+    """The frame's BVH (nodes.Bvh, kept by bvh/scene.SceneBvh) over tri_verts."""
     name = "bvh"
     packet = 8          # camera packets are 8x8 pixels
 
@@ -110,7 +110,7 @@ class BvhAccel:
         camera pass's Surface sees light j (lights (m, 4): kind, x, y, z).
         The shadow rays are made in the packets, in the samples' order,
         with no light-space sort: the gather's 32x32-pixel blocks are
-        coherent as they are (README, The BVH). Structures without this
+        coherent as they are (docs/accelerators.md). Structures without this
         method get LightRays, a light at a time."""
         n, c = bvh_sample_visibility(self.bvh, surface, lights, rows, vis, skip)
         return Counters.of(c), n

@@ -28,7 +28,7 @@ samples of every round, with those before, are stratified and symmetric
 about the centre (no shift of the image); rounds nest, so no sample is
 wasted. A pixel that reaches the cap therefore holds the plain `--spp cap`
 pattern plus at most cap / 4 earlier samples: it is never worse than the
-uniform image at the cap (tests/test_error_budget.py).
+uniform image at the cap (tests/render/test_error_budget.py).
 
 What is guaranteed is the estimate, not the true error: every pixel ends
 with its estimate at or below E, or with every sample it may have. A
@@ -38,9 +38,9 @@ thinner than the samples' spacing) is invisible to the estimate.
 import numpy as np
 from numba import prange
 
-from ._jit import kernel, parallel_arith_kernel
-from .camera import primary_dir
-from .sampling import budget_offsets
+from raycore.jit.presets import kernel, parallel_arith_kernel
+from raycore.geometry.camera import primary_dir
+from raycore.geometry.sampling import budget_offsets
 
 BLOCK = 8                    # active pixels are ordered by BLOCK x BLOCK blocks: packets of neighbours
 
@@ -118,7 +118,7 @@ def with_border_ring(rgba, width, height, bg, trace_passes):
     ((H+2)*(W+2), 4): a border pixel's contrast then sees what lies just
     beyond the frame. Without it, an object entering through the bottom
     edge, below the last row's centres, left the corner pixel of hand at
-    64^2 with error 0.17 under every budget (issue 20): its neighbours all
+    64^2 with error 0.17 under every budget: its neighbours all
     agreed. The ring costs 2 (W + H) + 4 camera rays, in three calls: the
     top row's pixels reach both horizontal sides (offsets y = -1/2 and
     H + 1/2), the left column's both vertical sides, pixel 0 the corners."""

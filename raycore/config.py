@@ -10,6 +10,15 @@ import numpy as np
 # the kernels take exactly these (sub-packets are 8x8 or the whole packet)
 PACKET_SIZES = (4, 8, 16, 32)
 
+# Block sizes -------------------------------------------------------------
+# The gather's pixel blocks (shading/surface.py, the sweep, the BVH's shadow
+# packets made from them): the largest camera packet.
+GATHER_BLOCK = 32
+# Blocks whose runs on one triangle average RUN_BLOCK samples fill their runs
+# of LONG_RUN or more with the triangle's data read once (surface.fill_block).
+RUN_BLOCK = 12
+LONG_RUN = 8
+
 # Tolerances --------------------------------------------------------------
 # Triangle AABBs and traversal ranges are widened by this fraction of the grid
 # extent so that rounding in `floor((x - min) / cell)` can never drop a cell
@@ -25,7 +34,7 @@ EPS_CULL_REL = 1e-5
 # the hit point grows with the vertices' magnitude (pbrt-v4 bounds it by
 # gamma(7) of sum |b_i v_i|), and the error of the distance at which a ray
 # from the light meets the receiving plane with the magnitudes of light,
-# vertices and ray length. tests/test_shadow_acne.py shows acne on ground
+# vertices and ray length. tests/raycore/test_shadow_acne.py shows acne on ground
 # planes of half-size 1e3 and 1e5 at 0 and 1 ulp, none from 2 on; 8 doubles
 # the margin of pbrt's bound, and stays below what a float32 scene resolves.
 EPS_OFFSET_ULPS = 8.0
@@ -45,15 +54,15 @@ EPS_KD_BOX_REL = np.float32(1e-6)
 # Structures -------------------------------------------------------------
 ACCELS = ("grid", "kdtree", "bvh")
 # shadow rays go through the BVH unless a scene or the command line says
-# otherwise: measured 1.1-2.9x faster than the grid's on every built-in scene (README,
-# Performance: the kd-tree's single rays are slower still)
+# otherwise: measured faster than the grid's on every built-in scene, and the
+# kd-tree's single rays are slower still (docs/performance.md, the shadow pass)
 SHADOW_ACCEL = "bvh"
 
 
 # an error budget (render.max_error) with spp 1 lets a pixel take up to this
 # many samples (its rounds end at 7, 15, 31, 63): a pixel still above the
 # budget after 63 stratified samples holds a sub-pixel feature that more
-# samples resolve only slowly (README, bench --error)
+# samples resolve only slowly (docs/performance.md, error against run time)
 ADAPTIVE_SPP_CAP = 64
 
 
@@ -67,7 +76,7 @@ class RenderConfig:
     shadows: bool = True           # cast shadow rays to every light
     accel: str = "grid"            # acceleration structure of camera rays (and of every ray by default)
     shadow_accel: str = ""         # structure of shadow rays; "" = SHADOW_ACCEL (measured fastest)
-    grid_density: float = 0.25     # lambda: grid cells ~= lambda * triangles (0.25 measured best, README)
+    grid_density: float = 0.25     # lambda: grid cells ~= lambda * triangles (0.25 measured best)
     background: tuple = (0.0, 0.0, 0.0)
     ambient: float = 0.03          # constant ambient term so shadowed areas are not pure black
     aovs: tuple = ()               # extra EXR channels: "N", "P", "id"
@@ -78,3 +87,8 @@ class RenderConfig:
     shutter_position: str = "center"   # where the frame time lies in the shutter: center | start | end
     aperture_radius: float = 0.0   # thin lens radius in scene units (0 = pinhole)
     focus_distance: float = 0.0    # distance of the sharp plane along the view axis (0 = eye to look_at)
+
+    @property
+    def shadow_structure(self) -> str:
+        """The structure the shadow rays go through: shadow_accel, else SHADOW_ACCEL."""
+        return self.shadow_accel or SHADOW_ACCEL

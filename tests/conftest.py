@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
-# parsed meshes (anim/mesh_cache.py) kept with the suite's other caches, not
+# parsed meshes (anim/io/mesh_cache.py) kept with the suite's other caches, not
 # in the user's ~/.cache; subprocesses inherit it
 os.environ.setdefault("FRUSTRACE_CACHE_DIR", str(ROOT / ".pytest_cache" / "frustrace"))
 
@@ -40,7 +40,7 @@ def tri_verts_of(vertices, faces):
     return np.ascontiguousarray(vertices[faces].reshape(-1, 9), np.float32)
 
 
-# where the session's cold start leaves its render (tests/test_wheel.py checks it)
+# where the session's cold start leaves its render (tests/cli/test_wheel.py checks it)
 COLD_START = ROOT / ".pytest_cache" / "cold_start"
 # the controller's cold start is under way / has ended (the xdist workers wait for it)
 COLD_START_RUNNING = ROOT / ".pytest_cache" / "cold_start.running"
@@ -102,9 +102,7 @@ def pytest_sessionfinish(session):
         proc.wait()
 
 
-# the longest test files, longest first (pytest --durations, 2026-12-03: faults
-# 74 s, cluster 66, exr_and_cli 18, builtin_scenes 18, grid_cgt 11,
-# input_checks 11, wheel 9): `make test` hands a whole file to a worker at a
+# the longest test files, longest first (pytest --durations): `make test` hands a whole file to a worker at a
 # time (--dist loadfile), in collection order, so the long ones go first and
 # the short ones fill in behind them, instead of one long file starting last
 # while the other worker runs out of work

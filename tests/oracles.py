@@ -2,8 +2,8 @@
 import numpy as np
 from numba import njit
 
-from raycore.camera import primary_dir
-from raycore.triangle import intersect_ray, ray_axes, woop_test
+from raycore.geometry.camera import primary_dir
+from raycore.geometry.triangle import intersect_ray, ray_axes, woop_test
 
 
 @njit(cache=True, error_model="numpy")
@@ -11,7 +11,7 @@ def brute_force_closest_one_by_one(origins, dirs, t_min, t_max, tri_verts):
     """Closest hit of every ray against every triangle: (t, prim, b1, b2).
     The plainest form (a ray, then every triangle in order through the
     renderer's intersect_ray): the reference brute_force_closest is checked
-    against (tests/test_triangle.py)."""
+    against (tests/raycore/test_triangle.py)."""
     n = origins.shape[0]
     out_t = np.full(n, np.inf, np.float32)
     out_prim = np.full(n, -1, np.int32)

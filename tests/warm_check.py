@@ -1,12 +1,13 @@
-"""Run as a script in a fresh process (tests/test_warm_up.py): warm_up, then
+"""Run as a script in a fresh process (tests/render/test_warm_up.py): warm_up, then
 three frames rendered and written; prints the numba kernels that compiled
 (or loaded) a new specialisation after warm_up: none may."""
 import sys, tempfile
 sys.path.insert(0, str(__import__('pathlib').Path(__file__).resolve().parent.parent))
 from anim.scene import AnimatedScene
-from anim.render.renderer import SceneRenderer, warm_up
+from anim.render.renderer import SceneRenderer
+from anim.render.warm_up import warm_up
 from anim.render.settings import config_of, shading_of
-from raycore.image_io import write_exr
+from raycore.images.image_io import write_exr
 
 def signatures():
     import numba.core.registry as reg

@@ -1,13 +1,13 @@
 """Built-in scenes (`frustrace assets`): SCENES are generated on demand,
 deterministic, and know their exact motion (`exact(t)`) for interpolation
 error studies; the demo ships as files (demo.py). ALL holds both."""
-from .demo import DemoScene
-from .fairy import FairyScene
-from .hand import HandScene
-from .marbles import MarblesScene
-from .runner import RunnerScene
-from .toys import ToysScene
-from .torus import TorusScene
+from anim.builtin.demo import DemoScene
+from anim.builtin.fairy import FairyScene
+from anim.builtin.hand import HandScene
+from anim.builtin.marbles import MarblesScene
+from anim.builtin.runner import RunnerScene
+from anim.builtin.toys import ToysScene
+from anim.builtin.torus import TorusScene
 
 SCENES = {s.name: s for s in (HandScene, RunnerScene, ToysScene, MarblesScene, FairyScene, TorusScene)}
 ALL = {"demo": DemoScene, **SCENES}

@@ -223,7 +223,7 @@ class BuiltinScene:
 
     def write(self, out_dir):
         """Write DIR/anim.yaml with its meshes, weights and textures."""
-        from raycore.image_io import write_texture
+        from raycore.images.image_io import write_texture
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         for file, pixels in self.textures.items():

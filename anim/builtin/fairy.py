@@ -2,13 +2,13 @@
 trees, rocks, mushrooms — that never moves, and a small fairy (1.5K
 triangles) flying a loop through it with flapping wings, followed by a
 fly-through camera. The case for leaving static work out: the forest is
-loaded, gathered and binned once (raycore/scene_grid.py)."""
+loaded, gathered and binned once (raycore/grid/incremental.py)."""
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .authoring import BuiltinScene, Part, RigidPart
-from .shapes import capsule, cone, ellipsoid, heightfield, icosphere, merge
-from .textures import grass, value_noise
+from anim.builtin.authoring import BuiltinScene, Part, RigidPart
+from anim.builtin.shapes import capsule, cone, ellipsoid, heightfield, icosphere, merge
+from anim.builtin.textures import grass, value_noise
 
 LOOP = 4.0
 SIZE = 30.0

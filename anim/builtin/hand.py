@@ -4,9 +4,9 @@ fingers curl and open in a wave and the wrist waves. Joint angles keyed
 influences per vertex blended across each knuckle."""
 import numpy as np
 
-from .authoring import BuiltinScene, Part, SkinnedPart, chain_weights
-from .shapes import capsule, ellipsoid, merge
-from .textures import checker
+from anim.builtin.authoring import BuiltinScene, Part, SkinnedPart, chain_weights
+from anim.builtin.shapes import capsule, ellipsoid, merge
+from anim.builtin.textures import checker
 
 BLEND = 0.05        # half-width (in finger-length units) of the weight blend at a knuckle
 CYCLE = 2.0

@@ -8,9 +8,9 @@ Marbles do not collide with each other: that keeps every path analytic
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .authoring import BuiltinScene, Part, RigidPart
-from .shapes import box, heightfield, icosphere
-from .textures import checker
+from anim.builtin.authoring import BuiltinScene, Part, RigidPart
+from anim.builtin.shapes import box, heightfield, icosphere
+from anim.builtin.textures import checker
 
 N_MARBLES = 110
 RADIUS = 0.07

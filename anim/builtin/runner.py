@@ -4,9 +4,9 @@ skinned over the whole body; the camera circles it. Joint angles keyed 17
 times per stride (catmull-rom, looped)."""
 import numpy as np
 
-from .authoring import BuiltinScene, Part, SkinnedPart, chain_weights
-from .shapes import capsule, ellipsoid, heightfield, merge
-from .textures import checker
+from anim.builtin.authoring import BuiltinScene, Part, SkinnedPart, chain_weights
+from anim.builtin.shapes import capsule, ellipsoid, heightfield, merge
+from anim.builtin.textures import checker
 
 STRIDE = 0.8
 BLEND = 0.06

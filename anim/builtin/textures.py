@@ -1,5 +1,5 @@
 """Procedural textures for the built-in scenes: (H, W, 3) float arrays in
-[0, 1], written to PNG by raycore.image_io.write_texture (OpenImageIO)."""
+[0, 1], written to PNG by raycore.images.image_io.write_texture (OpenImageIO)."""
 import numpy as np
 
 

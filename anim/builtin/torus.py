@@ -2,7 +2,7 @@
 keyframes with catmull-rom, the deforming-mesh benchmark of the foundation."""
 import numpy as np
 
-from .authoring import BuiltinScene, KeyframedPart
+from anim.builtin.authoring import BuiltinScene, KeyframedPart
 
 
 class TorusScene(BuiltinScene):

@@ -5,9 +5,9 @@ keyframes). Tracks keyed 12 times per second."""
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .authoring import BuiltinScene, KeyframedPart, Part, RigidPart
-from .shapes import capsule, cone, ellipsoid, heightfield, icosphere, merge
-from .textures import checker, stripes
+from anim.builtin.authoring import BuiltinScene, KeyframedPart, Part, RigidPart
+from anim.builtin.shapes import capsule, cone, ellipsoid, heightfield, icosphere, merge
+from anim.builtin.textures import checker, stripes
 
 LOOP = 4.0                       # every motion repeats after 4 s
 KEYS = np.linspace(0, LOOP, 49)

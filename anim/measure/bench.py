@@ -14,14 +14,15 @@ import numpy as np
 
 from anim import builtin
 from anim.errors import SceneError
-from anim.render.renderer import SceneRenderer, warm_up
+from anim.render.renderer import SceneRenderer
+from anim.render.warm_up import warm_up
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import STRUCTURE_KEYS, fps_of, median_ms
 from anim.scene import AnimatedScene
 from raycore.config import SHADOW_ACCEL
 from raycore.accelerators import packet_of
 from raycore.frame import CameraPose
-from raycore.image_io import write_exr
+from raycore.images.image_io import write_exr
 
 SCENE_NAMES = tuple(builtin.ALL)
 
@@ -87,8 +88,8 @@ def bvh_build_costs(scene, renderer, rows):
     slows unevenly) and median refit of the moving trees, in ms and in ms
     per 100K triangles;
     how often a refit tree was rebuilt, and its largest SAH growth."""
-    trees = renderer.scene_grid.scene_bvh()
-    tri_verts = renderer.scene_grid.tri_verts
+    trees = renderer.structures.scene_bvh()
+    tri_verts = renderer.structures.tri_verts
     builds = []
     for _ in range(5):
         t0 = time.perf_counter()
@@ -128,7 +129,7 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
     pools, which spin for a while after each call). With reference_z
     (frustrace's Z of the first measured frame), the share of pixels whose
     hit or miss agrees goes into the row."""
-    from .peers import peer_frame
+    from anim.measure.peers import peer_frame
     scene = AnimatedScene(path)
     lights = shading_of(scene).lights
     frames = scene.frame_numbers[:max(1, n_frames)]

@@ -3,13 +3,15 @@ structures — build and trace times, fps, ray/triangle tests, cells or nodes
 visited per packet — and how much their images differ."""
 import numpy as np
 
-from anim.render.renderer import SceneRenderer, warm_up
+from anim.render.renderer import SceneRenderer
+
+from anim.render.warm_up import warm_up
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
 from anim.scene import AnimatedScene
 from raycore.accelerators import packet_of
 
-from .bench import warm_up_frames
+from anim.measure.bench import warm_up_frames
 
 # each structure traces every ray of its frames, shadow rays included
 STRUCTURES = {

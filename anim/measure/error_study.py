@@ -13,9 +13,9 @@ import numpy as np
 from anim import builtin
 from anim.scene import AnimatedScene
 
-from .image_error import FULL, QUICK, RES, run_image_study
-from .interp_error import bounce_overshoot, measure
-from .precision import precision_study
+from anim.measure.image_error import FULL, QUICK, RES, run_image_study
+from anim.measure.interp_error import bounce_overshoot, measure
+from anim.measure.precision import precision_study
 
 FPS = 24.0     # frames per second used to amortise fitting over a period
 MAX_VERTICES = 8192   # the method study runs on at most this many moving vertices (evenly subsampled)

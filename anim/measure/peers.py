@@ -20,7 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from raycore.camera import camera_basis, pixel_centre_rays
+from raycore.geometry.camera import camera_basis, pixel_centre_rays
 
 # shadow rays start this fraction of the scene's extent off the surface,
 # along the geometric normal turned to the viewer (peers offer no error bounds)

@@ -15,8 +15,8 @@ import numpy as np
 from numba import njit, prange
 
 from raycore.accelerators import GridAccel
-from raycore.camera import camera_basis, pixel_centre_rays
-from raycore.grid_build import build_grid
+from raycore.geometry.camera import camera_basis, pixel_centre_rays
+from raycore.grid.build import build_grid
 
 SCALES = (1e-4, 1e-2, 1.0, 1e2, 1e4)
 OFFSETS = (0.0, 1e2, 1e4, 1e6)

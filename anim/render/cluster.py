@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from anim.errors import SceneError
-from anim.usd import is_usd
+from anim.io.usd import is_usd
 
 # the worker's scenes: bundle digest -> WorkerScene (kept between tasks)
 _WORKER_SCENES = {}
@@ -89,7 +89,7 @@ def _gltf_uris(path: Path, ref: str) -> list:
 
 def _usd_files(base: Path, ref: str, scene_path, index) -> list:
     """The layers and assets (textures) a USD stage reads, relative to the scene."""
-    from anim.usd import dependencies
+    from anim.io.usd import dependencies
     out = []
     root = base.resolve()
     for dep in dependencies(base / ref):
@@ -129,9 +129,11 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
     from anim.scene import AnimatedScene
     from raycore.config import RenderConfig
 
-    from .renderer import SceneRenderer, warm_up
-    from .settings import shading_of
-    from .warm_lock import warm_once
+    from anim.render.renderer import SceneRenderer
+
+    from anim.render.warm_up import warm_up
+    from anim.render.settings import shading_of
+    from anim.render.warm_lock import warm_once
     key = (bundle.digest, tuple(sorted(cfg_fields.items())))
     if key in _WORKER_SCENES:
         return _WORKER_SCENES[key]
@@ -154,10 +156,10 @@ def render_chunk(bundle: Bundle, cfg_fields: dict, frames: list, compression: st
                  run_info: dict) -> list:
     """Run on a worker: [(frame, exr bytes, stats row)] of consecutive frames.
     An error names its frame."""
-    from raycore._jit import set_threads
-    from raycore.image_io import write_exr
+    from raycore.jit.presets import set_threads
+    from raycore.images.image_io import write_exr
 
-    from .stats import frame_metadata, frame_row
+    from anim.render.stats import frame_metadata, frame_row
     set_threads(cfg_fields["threads"])
     worker = _worker_name()
     try:
@@ -240,7 +242,7 @@ def scheduler_address(scheduler: str) -> str:
 
 # what the embedded cluster's fork server imports once for all its workers
 WORKER_PRELOAD = ["numba", "anim.render.cluster", "anim.render.job", "anim.render.renderer",
-                  "raycore.image_io"]
+                  "raycore.images.image_io"]
 
 
 def _fork_workers_from_a_server():
@@ -249,7 +251,7 @@ def _fork_workers_from_a_server():
     (spawn: a fresh interpreter per worker that imports everything itself).
     Measured (2 vCPU, warm cache): `--workers 2` of 16 small demo frames
     2.3-2.6 s and 3.8-4.2 s of CPU spawned, 1.9-2.0 s and 2.6-2.8 s forked;
-    tests/test_cluster.py 28 + 6.4 s of CPU, then 17 + 3.0 s. Nothing imported starts a thread,
+    tests/render/test_cluster.py 28 + 6.4 s of CPU, then 17 + 3.0 s. Nothing imported starts a thread,
     so the fork is safe. A method set in Dask's configuration other than its
     default is kept, and so is spawn where there is no fork server (Windows).
     The server is started inside connect()'s SIGINT-ignoring window, so its

@@ -1,11 +1,11 @@
-"""A cold numba cache filled by two processes at once (issue 21).
+"""A cold numba cache filled by two processes at once.
 
 On a first run every kernel is compiled, one after another, on one core,
 while the other cores idle. The kernels split into two halves that need
 nothing of each other's results to be compiled: the camera half
 (interpolation, the structures' builds, the camera rays' traversal, and the
 EXR write's half floats, which even the halves out) and the surface half (the
-sweep of shade_blocks.py: the visible-surface gather, the shadow rays and
+sweep of sweep.py: the visible-surface gather, the shadow rays and
 their traversal, shading and the image's pixels, and, where that evens
 the halves out, the shadow BVH's refit: refits_the_bvh). So the main
 process compiles the camera half while a helper process compiles the
@@ -27,11 +27,12 @@ import sys
 
 import numpy as np
 
-from raycore.counters import Counters
-from raycore.trace import Hits, row_major_offsets
+from raycore.jit.counters import Counters
+from raycore.frame import sweeps_in_one
+from raycore.grid.trace import Hits, row_major_offsets
 
 # the surface half's kernels that tell whether the cache is cold
-_PROBES = ("raycore.shade_blocks:shade_blocks",)
+_PROBES = ("raycore.sweep:shade_blocks",)
 
 
 def _cached(probe) -> bool:
@@ -90,16 +91,16 @@ class Helper:
 def refits_the_bvh(cfg, shading) -> bool:
     """Whether the helper, not the main process, compiles the shadow BVH's
     refit: when the frames refit one for their shadow rays and the
-    helper's half is the sweep alone (BVH shadows, camera
-    rays not through a BVH, no AOVs, no error budget, no area light), and
-    the main process's half, the camera rays and the builds, the longer
-    without it (demo: 29-33 s against 22-25). With the phase by phase path's
-    kernels the helper's half is the longer (fairy with every feature on:
-    40 s against 33), and the refit stays with the main process."""
-    from raycore.config import SHADOW_ACCEL
-    return (cfg.shadows and shading.lights.shape[0] > 0 and (cfg.shadow_accel or SHADOW_ACCEL) == "bvh"
-            and cfg.accel != "bvh" and not cfg.aovs and cfg.max_error <= 0
-            and not bool((shading.lights[:, 7] > 0).any()))
+    helper's half is the sweep alone (frame.sweeps_in_one with BVH shadows,
+    camera rays not through a BVH, no error budget, no area light), and
+    the main process's half, the camera rays and the builds, is the longer
+    without it. With the phase by phase path's kernels (or an area light's)
+    the helper's half is the longer, and the refit stays with the main
+    process."""
+    lights = shading.lights
+    return (cfg.shadows and lights.shape[0] > 0 and cfg.shadow_structure == "bvh"
+            and sweeps_in_one(cfg, lights, 1) and cfg.accel != "bvh" and cfg.max_error <= 0
+            and not bool((lights[:, 7] > 0).any()))
 
 
 def start(scene, cfg, t):
@@ -133,7 +134,7 @@ def made_up_bvh(tri_verts, workspace):
     camera half's): one leaf of the first 8 triangles in a box around
     everything, with the types and layout of a built tree."""
     from raycore.accelerators import BvhAccel
-    from raycore.bvh_build import CHILD, COUNT, empty_bvh
+    from raycore.bvh.nodes import CHILD, COUNT, empty_bvh
     k = min(tri_verts.shape[0], 8)
     bvh = empty_bvh(1, k)
     bvh.node[0, :3] = -1e30
@@ -155,9 +156,8 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
     from anim.render.renderer import SceneRenderer
     from anim.render.settings import shading_of
     from anim.scene import AnimatedScene
-    from raycore.config import SHADOW_ACCEL
     from raycore.frame import CameraPose, Geometry, render_frame
-    from raycore.scene_bvh import SceneBvh
+    from raycore.bvh.scene import SceneBvh
 
     scene = AnimatedScene(scene_path, camera)
     shading = shading_of(scene)
@@ -167,17 +167,17 @@ def compile_surface_half(scene_path, camera, cfg, t) -> dict:
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *renderer.vf)
         camera_hits = MadeUpHits(scene.faces.shape[0])
         shadow_bvh = None
-        if (cfg.shadow_accel or SHADOW_ACCEL) == "bvh":
+        if cfg.shadow_structure == "bvh":
             tri_verts = np.ascontiguousarray(vertices[scene.faces].reshape(-1, 9))
             shadow_bvh = made_up_bvh(tri_verts, renderer.buffers.work)
             if refits_the_bvh(cfg, shading):
                 SceneBvh(scene.faces.shape[0], [], [], scene.faces).refit_moving(tri_verts, vertices)
         pose = CameraPose(*scene.camera_at(t))
         for _ in range(2):        # the second frame takes the per-frame paths
-            render_frame(geom, shading, pose, cfg, renderer.buffers, renderer.scene_grid,
+            render_frame(geom, shading, pose, cfg, renderer.buffers, renderer.structures,
                          camera_accel=camera_hits, shadow_accel=shadow_bvh)
         # the zip codec's byte layout (the camera half has the longer compile)
-        from raycore.exr_zip import CODES, split_blocks
+        from raycore.images.exr_zip import CODES, split_blocks
         if scene.spec.output.compression in CODES:
             planar = np.zeros(8, np.uint8)
             split_blocks(planar, np.zeros(1, np.int64), np.full(1, 8, np.int64), 1, CODES["zip"][1],

@@ -1,7 +1,7 @@
 """What numba compiles during a run, and for how long: a listener on numba's
 "numba:compile" events (fired on a cache miss only, so a warm run records
 nothing). The command line shows a line while a first run compiles, and
-stats.json lists the kernels compiled with their seconds (issue 21)."""
+stats.json lists the kernels compiled with their seconds."""
 import threading
 import time
 from contextlib import contextmanager

@@ -7,7 +7,7 @@ from pathlib import Path
 from anim.errors import SceneError
 from raycore.config import RenderConfig
 
-from .output_dir import file_crc32, whole_frame
+from anim.render.output_dir import file_crc32, whole_frame
 
 
 def split_pattern(pattern: str):
@@ -49,7 +49,7 @@ def frame_file(scene, out_dir, frame) -> Path:
 def existing_frames(scene, out_dir, frames) -> dict:
     """{frame: path} of the files of `frames` that exist, from one listing of
     the frames' directory: a stat per frame made a 10,000,000-frame range
-    take minutes before its first frame (issue 20)."""
+    take minutes before its first frame."""
     if len(frames) == 0:
         return {}
     directory = frame_file(scene, out_dir, frames[0]).parent

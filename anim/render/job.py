@@ -15,20 +15,22 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
+import raycore
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
-from raycore.image_io import temp_path, write_exr
+from raycore.images.image_io import temp_path, write_exr
 
-from .compile_watch import watching
-from .frame_files import existing_frames, frame_file, plan_frames
-from .output_dir import claim, file_crc32, release, remove_stale_temps
-from .paths import writable_dir, writable_file
-from .renderer import SceneRenderer, check_memory, warm_up
-from .settings import shading_of
-from .stats import frame_metadata, frame_row, read_stats, settings_of, stats_owner_problem, write_stats
+from anim.render.compile_watch import watching
+from anim.render.frame_files import existing_frames, frame_file, plan_frames
+from anim.render.output_dir import claim, file_crc32, release, remove_stale_temps
+from anim.render.paths import writable_dir, writable_file
+from anim.render.renderer import SceneRenderer, check_memory
+from anim.render.warm_up import warm_up
+from anim.render.settings import shading_of
+from anim.render.stats import frame_metadata, frame_row, read_stats, settings_of, stats_owner_problem, write_stats
 
-VERSION = "0.1.0"
+VERSION = raycore.__version__
 MAX_PENDING_WRITES = 0
 
 
@@ -203,7 +205,7 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run
 
     from distributed import as_completed
 
-    from .cluster import TASK_RETRIES, bundle_scene, chunks_of, render_chunk
+    from anim.render.cluster import TASK_RETRIES, bundle_scene, chunks_of, render_chunk
     scene, cfg = job.scene, job.cfg
     mine = [(f, p) for f, p in todo if take(f, p)]
     paths = dict(mine)

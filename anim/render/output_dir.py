@@ -6,7 +6,7 @@ side:
   size and channels whose last scanline chunk reads back (a file cut short
   by a crash or a full disk, or one written by something else, is not);
 * remove_stale_temps: a frame is written under `.NAME.PID.tmp.exr` and
-  renamed into place (raycore/image_io.py), stats.json and claims likewise
+  renamed into place (raycore/images/image_io.py), stats.json and claims likewise
   under `.NAME.PID.tmp`; such a file whose process is gone is a leftover of
   a kill and is removed;
 * claims: before a render starts a frame it creates `.NAME.claim` (O_EXCL:
@@ -43,7 +43,7 @@ def whole_frame(path: Path, width: int, height: int, channels, crc32=None) -> st
     written, the bytes are compared with it (~1 ms at 1024^2), and without
     one (a frame of a run that was killed before its stats were written)
     every pixel is decoded (~57 ms at 1024^2, against ~300 ms to render and
-    write the frame; measured, issue 20): a frame with bytes flipped in its
+    write the frame): a frame with bytes flipped in its
     middle kept its size and its last scanline, and no reader could open it."""
     inp = oiio.ImageInput.open(str(path))
     if inp is None:

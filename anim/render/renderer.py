@@ -6,12 +6,11 @@ import time
 
 from anim.errors import SceneError
 from anim.scene import AnimatedScene
-from raycore.config import SHADOW_ACCEL, RenderConfig
-from raycore.camera import camera_basis
-from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, build_structures, render_frame
-from raycore.half_float import to_half
-from raycore.mesh import vertex_face_csr
-from raycore.scene_grid import SceneGrid
+from raycore.config import RenderConfig
+from raycore.geometry.camera import camera_basis
+from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
+from raycore.geometry.mesh import vertex_face_csr
+from raycore.structures import FrameStructures
 
 
 class SceneRenderer:
@@ -25,8 +24,8 @@ class SceneRenderer:
         # write in flight (pending_writes: how many frames may still be writing)
         self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet,
                                     n_images=pending_writes + 2)
-        # static objects: gathered, binned and given normals once (raycore/scene_grid.py)
-        self.scene_grid = SceneGrid(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
+        # static objects: gathered, binned and given normals once (raycore/grid/incremental.py)
+        self.structures = FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
                                     scene.moving_triangles, scene.moving_object_ranges)
 
     def render(self, t):
@@ -38,7 +37,7 @@ class SceneRenderer:
         interp_ms = (time.perf_counter() - t0) * 1e3
         geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
         motion = self.shutter(t)
-        result = render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.scene_grid, motion=motion)
+        result = render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.structures, motion=motion)
         return interp_ms + (motion.interp_ms if motion else 0.0), result
 
     def shutter(self, t):
@@ -57,8 +56,8 @@ class SceneRenderer:
         geom = Geometry(vertices, self.scene.faces, self.scene.tri_material, self.scene.uvs, *self.vf)
         names = {self.cfg.accel}
         if shadow_structure and self.cfg.shadows and self.shading.lights.shape[0] > 0:
-            names.add(self.cfg.shadow_accel or SHADOW_ACCEL)
-        _, built = build_structures(names, geom, self.cfg, self.scene_grid, self.buffers, {})
+            names.add(self.cfg.shadow_structure)
+        _, built = self.structures.build(names, geom, self.cfg, self.buffers, {})
         pose = CameraPose(*self.scene.camera_at(t))
         cam = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, self.cfg.width, self.cfg.height)
         built[self.cfg.accel].trace_camera(cam, self.cfg.width, self.cfg.height, (0.5, 0.5))
@@ -88,56 +87,6 @@ class Shutter:
         out = self.scene.vertices_at(t, self.held), CameraPose(*self.scene.camera_at(t))
         self.interp_ms += (time.perf_counter() - t0) * 1e3
         return out
-
-
-def warm_up(scene, shading, cfg, t):
-    """Compile (or load from numba's cache) every kernel the frame loop will
-    use, on a tiny image with the run's settings: two frames (the second
-    takes the per-frame paths the first does not: the BVH's refit, a moved
-    grid) and an EXR write (the half-float conversion). Returns (seconds,
-    {kernel: s} compiled by a helper process); the seconds are reported as
-    compile time. Warming only one 1-spp frame left the write, the refit and
-    the error budget to compile inside frames 0 and 1 (write_ms 731,
-    shade_ms 945 on a cold run; issue 20).
-
-    On a cold cache a helper process compiles the surface half meanwhile
-    (compile_helper.py): this process first compiles the camera half (with
-    the structures' builds and the EXR write's half floats, to even the
-    halves out), waits for the helper, and then loads its
-    kernels (the zip layout among them) from the cache."""
-    from . import compile_helper
-    t0 = time.perf_counter()
-    dt = 1.0 / scene.spec.frames.fps
-    small = cfg.__class__(**{**cfg.__dict__, "width": 2 * cfg.packet, "height": 2 * cfg.packet})
-    helper = compile_helper.start(scene, small, t)
-    renderer = SceneRenderer(scene, small, shading)
-    helper_compiled = {}
-    if helper is not None:
-        done = False
-        try:
-            # the EXR write's half floats first, which the helper reaches last
-            # (the write's zip layout is the helper's: it loads after)
-            to_half(renderer.buffers.image()[0])
-            renderer.trace_camera_only(t)
-            # the shadow BVH's refit is the helper's where that evens the halves out
-            renderer.trace_camera_only(t + dt, shadow_structure=not compile_helper.refits_the_bvh(small, shading))
-            done = True
-        finally:
-            helper_compiled = helper.finish(wait=done)
-    renderer.render(t)
-    _, result = renderer.render(t + dt)
-    _write_trial({"RGBA": result.rgba, "Z": result.z, **result.aovs}, scene.spec.output.compression)
-    return time.perf_counter() - t0, helper_compiled
-
-
-def _write_trial(channels, compression):
-    """An EXR of these channels into a temporary directory, and gone: what
-    compiles (or loads) the write's kernels."""
-    import tempfile
-
-    from raycore.image_io import write_exr
-    with tempfile.TemporaryDirectory() as tmp:
-        write_exr(f"{tmp}/warm.exr", channels, {}, compression)
 
 
 # bytes per pixel of one pass: camera hits (16), the visible-surface rows (96),

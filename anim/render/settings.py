@@ -5,7 +5,7 @@ from anim.errors import SceneError
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.frame import Shading
-from raycore.image_io import read_texture
+from raycore.images.image_io import read_texture
 
 
 def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:

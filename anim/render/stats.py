@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from raycore.accelerators import packet_of
-from raycore.config import SHADOW_ACCEL, RenderConfig
+from raycore.config import RenderConfig
 
-from .output_dir import process_alive
+from anim.render.output_dir import process_alive
 
 
 def write_stats(path: Path, scene, cfg, rows, run, file_of, on_disk, verified=None) -> dict:
@@ -156,7 +156,7 @@ STRUCTURE_KEYS = ("grid_dims", "kd_nodes", "bvh_build_ms", "bvh_refit_ms", "bvh_
 def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
     size the accelerator really used (the kd-tree's and the BVH's are 8x8)."""
-    return {"accel": cfg.accel, "shadow_accel": cfg.shadow_accel or SHADOW_ACCEL,
+    return {"accel": cfg.accel, "shadow_accel": cfg.shadow_structure,
             "packet": packet_of(cfg.accel, cfg.packet),
             "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
             **({"max_error": cfg.max_error} if cfg.max_error > 0 else {}),
@@ -227,7 +227,7 @@ def summarize(rows, wall_s, compile_s) -> dict:
 def stats_owner_problem(previous, scene):
     """Why an existing stats.json may not take this scene's frames ('' if it
     may): it belongs to another scene file. Two scenes in one stats.json
-    kept one frame 0 and switched its `scene` silently (issue 20)."""
+    kept one frame 0 and switched its `scene` silently."""
     if not previous:
         return ""
     mine = str(Path(scene.path).resolve())

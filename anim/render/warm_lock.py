@@ -14,7 +14,7 @@ warms up at once, as before."""
 import hashlib
 import os
 
-from anim.mesh_cache import cache_root
+from anim.io.mesh_cache import cache_root
 
 try:
     import fcntl
@@ -26,7 +26,7 @@ def warm_once(key: str, warm):
     """warm(), the warm-up of the kernel set named by key; under the machine's
     warm-up lock unless a marker says the set was warmed up before. Returns
     what warm() returns."""
-    from raycore.kernel_cache import PACKAGE_STAMP, RAYCORE
+    from raycore.jit.kernel_cache import PACKAGE_STAMP, RAYCORE
     root = cache_root()
     if root is None or fcntl is None:
         return warm()

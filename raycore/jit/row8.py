@@ -1,0 +1,62 @@
+"""Rows of 8 float32 handled as one vector: the BVH build's box arithmetic.
+
+The build keeps every box as 8 floats (lo x, y, z, -, -hi x, y, z, -; see
+bvh/build.ROW), so that growing a box by another is one 8-lane minimum.
+Written as numba code, the eight scalar minima stayed scalar (LLVM's SLP
+vectorizer did not join them: numba's min is not the plain compare and
+select it looks for), so these intrinsics emit the vector load, compare,
+select and store themselves. Binned-SAH build of 82K triangles on one
+thread: 58 -> 40 ms.
+"""
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+V8 = ir.VectorType(ir.FloatType(), 8)
+
+
+def vector_pointer(context, builder, aryty, ary_val, indices):
+    """Pointer to the element at `indices` of an array (8 contiguous float32
+    from there on), as <8 x float>*."""
+    ary = context.make_array(aryty)(context, builder, ary_val)
+    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, indices)
+    return builder.bitcast(ptr, V8.as_pointer())
+
+
+def _row_ptr(context, builder, aryty, ary_val, row):
+    """Pointer to row `row` of a 2-d array (rows of >= 8 contiguous float32), as <8 x float>*."""
+    return vector_pointer(context, builder, aryty, ary_val, [row, ir.Constant(ir.IntType(64), 0)])
+
+
+@intrinsic
+def min_rows(typingctx, dst, i, src, k):
+    """dst[i, :8] = minimum(dst[i, :8], src[k, :8]), lane by lane (d < s ? d : s)."""
+    sig = types.void(dst, types.int64, src, types.int64)
+
+    def codegen(context, builder, signature, args):
+        d_ty, _, s_ty, _ = signature.args
+        pd = _row_ptr(context, builder, d_ty, args[0], args[1])
+        ps = _row_ptr(context, builder, s_ty, args[2], args[3])
+        d = builder.load(pd, align=4)
+        s = builder.load(ps, align=4)
+        builder.store(builder.select(builder.fcmp_ordered("<", d, s), d, s), pd, align=4)
+        return context.get_dummy_value()
+    return sig, codegen
+
+
+@intrinsic
+def swap_rows(typingctx, a, i, j):
+    """Rows i and j of a (n, 8) float32 array swapped."""
+    sig = types.void(a, types.int64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        ty = signature.args[0]
+        pi = _row_ptr(context, builder, ty, args[0], args[1])
+        pj = _row_ptr(context, builder, ty, args[0], args[2])
+        x = builder.load(pi, align=4)
+        y = builder.load(pj, align=4)
+        builder.store(y, pi, align=4)
+        builder.store(x, pj, align=4)
+        return context.get_dummy_value()
+    return sig, codegen
