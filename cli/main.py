@@ -235,19 +235,17 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
 @click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
-def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet, threads, no_shadows, spp, max_error,
-           shutter, stats_path, resume, overwrite, quiet, res, preview_path, workers, scheduler, chunk,
-           tls_ca, tls_cert, tls_key):
+def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrite, quiet, preview_path, workers,
+           scheduler, chunk, tls_ca, tls_cert, tls_key, **settings):
     """Render ANIM_YAML (a scene file, or a USD stage: .usd, .usda, .usdc,
     .usdz) to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
     if workers and scheduler:
         raise click.UsageError("--workers and --scheduler exclude each other")
-    from anim.render.frame_files import frame_path
+    from anim.render.frame_files import frames_dir
     from anim.render.job import RenderJob, render_animation
-    from anim.render.settings import config_of, one_pass_blur_warning
-    from raycore.jit.presets import set_threads
+    from anim.render.settings import render_config
 
     from cli.report import progress, summary_table
 
@@ -255,13 +253,6 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too
-    n_threads = set_threads(threads)
-    if workers and not threads:            # the cores shared among the local workers
-        n_threads = max(1, (os.cpu_count() or 1) // workers)
-    elif scheduler and not threads:
-        n_threads = 0                      # each worker: all of its machine's cores
-    width, height = res if res else (None, None)
-    structure = accel or spec.render.accel
     if not (workers or scheduler):
         ctx = click.get_current_context()
         given = [name for name, param in (("--chunk", "chunk"), ("--tls-ca", "tls_ca"), ("--tls-cert", "tls_cert"),
@@ -270,19 +261,10 @@ def render(anim_yaml, camera, out_dir, frames_text, accel, shadow_accel, packet,
         if given:
             click.echo(f"frustrace: warning: {', '.join(given)} {'is' if len(given) == 1 else 'are'} for "
                        "--workers or --scheduler; this render runs in this process", err=True)
-    if packet and structure != "grid":
-        from raycore.accelerators import packet_of
-        side = packet_of(structure, int(packet))
-        name = {"kdtree": "kd-tree", "bvh": "BVH"}[structure]
-        click.echo(f"frustrace: warning: --packet is for the grid; the {name} traces {side}x{side} packets", err=True)
-    cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp,
-                    max_error=max_error, shadows=spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
-                    width=width, height=height, shutter=shutter)
-    if (blur_warning := one_pass_blur_warning(cfg)) is not None:
-        click.echo(f"frustrace: warning: {blur_warning}", err=True)
-    first = Path(frame_path(spec.output.path, frames[0]))
-    frames_dir = out_dir if out_dir is not None else (first.parent if first.is_absolute() else scene.path.parent / first.parent)
-    stats_path = stats_path or frames_dir / "stats.json"
+    cfg, notes = render_config(scene, workers=workers, scheduler=scheduler, **settings)
+    for note in notes:
+        click.echo(f"frustrace: warning: {note}", err=True)
+    stats_path = stats_path or frames_dir(scene, out_dir, frames[0]) / "stats.json"
     job = RenderJob(scene, cfg, frames, out_dir, stats_path, resume, overwrite, chunk)
     show = not quiet and sys.stderr.isatty()
     if preview_path:

@@ -1,6 +1,5 @@
 """Small scene files for tests: the demo's meshes and a scene of the objects given."""
 import shutil
-from pathlib import Path
 
 from conftest import ROOT
 

@@ -46,6 +46,15 @@ def frame_file(scene, out_dir, frame) -> Path:
     return path if path.is_absolute() else scene.path.parent / path
 
 
+def frames_dir(scene, out_dir, first_frame) -> Path:
+    """The folder the frames go to: --out-dir, else output.path's folder
+    (relative to the scene file)."""
+    if out_dir is not None:
+        return Path(out_dir)
+    first = Path(frame_path(scene.spec.output.path, first_frame))
+    return first.parent if first.is_absolute() else scene.path.parent / first.parent
+
+
 def existing_frames(scene, out_dir, frames) -> dict:
     """{frame: path} of the files of `frames` that exist, from one listing of
     the frames' directory: a stat per frame made a 10,000,000-frame range

@@ -1,4 +1,6 @@
 """A scene file's render settings and shading tables, as raycore takes them."""
+import os
+
 import numpy as np
 
 from anim.errors import SceneError
@@ -21,6 +23,34 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
                 aperture_radius=spec.camera.aperture_radius, focus_distance=spec.camera.focus_distance or 0.0)
     base.update({k: v for k, v in overrides.items() if v is not None})
     return RenderConfig(**base)
+
+
+def render_config(scene: AnimatedScene, *, accel=None, shadow_accel=None, packet=None, threads=0, workers=None,
+                  scheduler=None, spp=None, max_error=None, no_shadows=False, res=None, shutter=None) -> tuple:
+    """(RenderConfig, warnings) of `frustrace render`: the scene's settings
+    with the options given, the render threads set (a local cluster's
+    workers share the cores; a remote worker takes all of its machine's),
+    and the warnings the combination calls for."""
+    from raycore.accelerators import packet_of
+    from raycore.jit.presets import set_threads
+    warnings = []
+    n_threads = set_threads(threads)
+    if workers and not threads:
+        n_threads = max(1, (os.cpu_count() or 1) // workers)
+    elif scheduler and not threads:
+        n_threads = 0
+    structure = accel or scene.spec.render.accel
+    if packet and structure != "grid":
+        side = packet_of(structure, int(packet))
+        name = {"kdtree": "kd-tree", "bvh": "BVH"}[structure]
+        warnings.append(f"--packet is for the grid; the {name} traces {side}x{side} packets")
+    width, height = res if res else (None, None)
+    cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp, max_error=max_error,
+                    shadows=scene.spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
+                    width=width, height=height, shutter=shutter)
+    if (blur := one_pass_blur_warning(cfg)) is not None:
+        warnings.append(blur)
+    return cfg, warnings
 
 
 def one_pass_blur_warning(cfg: RenderConfig):

@@ -227,8 +227,11 @@ def test_fps_wall_leaves_the_compile_time_out(small_demo, tmp_path, monkeypatch)
         time_module.sleep(1.5)
         return 1.5, {}
     monkeypatch.setattr(job_module, "warm_up", slow_warm_up)
+    t0 = time_module.perf_counter()
     res = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(tmp_path / "o"), "--frames", "0:1", "-q"])
+    elapsed = time_module.perf_counter() - t0
     assert res.exit_code == 0, res.output
     stats = json.loads((tmp_path / "o" / "stats.json").read_text())
     run = stats["runs"][-1]
-    assert run["compile_s"] == 1.5 and run["wall_s"] < 1.0
+    # the run's wall clock is the command's less the warm-up, however slow the host
+    assert run["compile_s"] == 1.5 and run["wall_s"] <= elapsed - 1.5
