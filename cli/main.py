@@ -430,10 +430,15 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
                    "output.resolution (built-in scenes: 1024x1024).")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Threads; 0 = all cores.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the table as JSON.")
-def compare(structures, scene_name, n_frames, res, threads, json_path):
-    """Compare acceleration structures on one scene: `compare grid vs kdtree
-    [ANIM.yaml | --scene NAME]`. Structures: grid, grid-nocull (no frustum
-    culling, no mailboxes), kdtree. Prints build and trace ms, fps, ray/triangle
+@click.option("--shadow-accel", type=click.Choice(ACCELS),
+              help="Structure of every row's shadow rays (default: render.shadow_accel, else bvh).")
+@click.option("--camera", metavar="PRIM", help="For a USD stage: the camera prim to look through.")
+def compare(structures, scene_name, n_frames, res, threads, json_path, shadow_accel, camera):
+    """Compare the camera rays' acceleration structures on one scene:
+    `compare grid vs kdtree [vs bvh] [ANIM.yaml | --scene NAME]` (ANIM.yaml
+    may be a USD stage). Structures: grid, grid-nocull (no frustum culling,
+    no mailboxes), kdtree, bvh. Every row's shadow rays go through one
+    structure (--shadow-accel). Prints build and trace ms, fps, ray/triangle
     tests and cells/nodes per packet for each, and the largest image difference."""
     import json
     import tempfile
@@ -460,7 +465,8 @@ def compare(structures, scene_name, n_frames, res, threads, json_path):
             if scene_name not in builtin.ALL:
                 raise click.BadParameter(f"unknown scene {scene_name!r}", param_hint="--scene")
             path = scene_file(scene_name, Path(tmp))
-        result = run_compare(Path(path), names, n_frames, res, n_threads, label=scene_name or str(path))
+        result = run_compare(Path(path), names, n_frames, res, n_threads, label=scene_name or str(path),
+                             shadow_accel=shadow_accel, camera=camera)
     result["threads"] = n_threads
     timed = result["rows"][0]["frames"]
     if timed < n_frames:

@@ -145,7 +145,8 @@ def compare_table(result, console=None):
     r0 = rows[0]
     title = (f"frustrace compare: {result['scene']}  {r0['triangles']} triangles  "
              f"{r0['resolution'][0]}x{r0['resolution'][1]}  {r0['frames']} frames  "
-             f"{result.get('threads', '?')} threads (medians per frame)")
+             f"{result.get('threads', '?')} threads (medians per frame); shadow rays of every row through "
+             f"the {result.get('shadow_accel', '?')}")
     columns = [("structure", None), ("packet", 3), ("build ms", None), ("trace ms", None), ("shadow ms", None),
                ("fps_raycast", None), ("fps_full", None), ("primary tests", 4), ("all tests", 2),
                ("cells/nodes per packet", 1), ("published tests", 0)]

@@ -140,6 +140,59 @@ def with_border_ring(rgba, width, height, bg, trace_passes):
     return padded.reshape(-1, 4)
 
 
+class _Refined:
+    """The pixels being refined, each with a slot: running sums of their
+    samples (the centre sample included), nearest depth and sample count."""
+
+    def __init__(self, rgba, z, n_pix):
+        self.rgba, self.z = rgba, z
+        self.slot = np.full(n_pix, -1, np.int64)
+        self.pixels = np.zeros(0, np.int64)
+        self.sums = np.zeros((0, 4), np.float64)
+        self.zmin = np.zeros(0, np.float32)
+        self.count = np.zeros(0, np.int64)
+
+    def add(self, pixels):
+        """Slots for `pixels` (not yet refined), which start from their
+        1-spp sample; returns the slots."""
+        first = self.pixels.size
+        self.pixels = np.concatenate([self.pixels, pixels])
+        self.sums = np.concatenate([self.sums, self.rgba[pixels].astype(np.float64)])
+        self.zmin = np.concatenate([self.zmin, self.z[pixels]])
+        self.count = np.concatenate([self.count, np.ones(pixels.size, np.int64)])
+        self.slot[pixels] = np.arange(first, self.pixels.size)
+        return np.arange(first, self.pixels.size)
+
+
+def _advance(px, slots, total, offsets, totals, trace_passes, bg, n_pix):
+    """Take the pixels of `slots` (all with one sample count) to `total`
+    samples; returns the sums at the round's half (see half_difference)
+    and where that half lies."""
+    done = int(px.count[slots[0]])
+    pixels = px.pixels[slots]
+    # the estimate compares two halves: in a nested round, the centre and the
+    # first half of the pairs against the rest; in the last round, the
+    # samples before it against the plain set
+    half_at = done if total == totals[-1] else max((total - 1) // 2, done)
+    half = px.sums[slots] if done == half_at else None
+    value = np.empty((px.pixels.size, 4), np.float32)
+    # the round's passes in groups of about one image's worth of samples:
+    # traced and shaded together, their shadow rays are one denser set
+    group = max(1, n_pix // pixels.size)
+    i = done
+    while i < total:
+        end = min(i + group, total)
+        if i < half_at < end:
+            end = half_at                              # a group ends at the half
+        for hit_pixel, rgb, depth in trace_passes(pixels, offsets[i:end]):
+            add_pass(pixels, px.slot, hit_pixel, rgb, depth, bg, px.sums, px.zmin, value)
+        if end == half_at:
+            half = px.sums[slots]                      # a copy
+        i = end
+    px.count[slots] = total
+    return half, half_at
+
+
 def refine(rgba, z, width, height, background, max_error, cap, trace_passes, times_lens=None):
     """Spend samples where the 1-spp image `rgba` (H*W, 4), `z` (H*W,) is
     above `max_error`, up to the plain `cap`-sample set per pixel (plus the
@@ -158,71 +211,62 @@ def refine(rgba, z, width, height, background, max_error, cap, trace_passes, tim
     and every pixel takes the first nested round, whatever its contrast.
 
     Returns (samples per pixel (H*W,) int32, error estimate (H*W,) f32):
-    the estimate a pixel stopped at (1 spp: the neighbour contrast)."""
+    the estimate a pixel stopped at (1 spp: the neighbour contrast).
+
+    A pixel's neighbour term is the contrast it has seen, weighted by the
+    samples it had when it saw it, over the samples it has now. After every
+    round the contrast is measured again on the refined means: where a
+    pixel's neighbours now show more than it had seen (a faint blurred edge
+    that the neighbour's later samples found, which all of this pixel's
+    samples missed), the new contrast counts with the pixel's samples now,
+    and a pixel that had stopped, or had not started, is refined again."""
     n_pix = width * height
-    samples = np.ones(n_pix, np.int32)
     bg = np.asarray(background, np.float32)
     padded = with_border_ring(rgba, width, height, bg, trace_passes)
-    contrast = np.empty((height + 2) * (width + 2), np.float32)
-    neighbour_contrast(padded, width + 2, height + 2, contrast)
-    estimate = np.ascontiguousarray(contrast.reshape(height + 2, width + 2)[1:-1, 1:-1]).reshape(-1)
-    contrast = estimate.copy()
-    # under motion blur or a thin lens one sample says nothing of what the
-    # shutter or the lens spreads over a pixel: every pixel takes the first round
-    active = np.flatnonzero((estimate > max_error) | (times_lens is not None)).astype(np.int64)
-    if cap <= 1 or active.size == 0:
+    inner = np.empty((height + 2) * (width + 2), np.float32)
+
+    def contrast_now():
+        neighbour_contrast(padded, width + 2, height + 2, inner)
+        return np.ascontiguousarray(inner.reshape(height + 2, width + 2)[1:-1, 1:-1]).reshape(-1)
+    estimate = contrast_now()
+    # under motion blur or a thin lens the 1-spp image is one instant and the
+    # lens centre: every pixel takes the first round, and its contrast, seen
+    # on no real mean yet, counts as unseen
+    blurred = times_lens is not None
+    seen = np.zeros(n_pix, np.float32) if blurred else estimate.copy()
+    weight = estimate.astype(np.float64)                  # seen contrast x samples then
+    samples = np.ones(n_pix, np.int32)
+    start = np.flatnonzero((estimate > max_error) | blurred).astype(np.int64)
+    if cap <= 1 or start.size == 0:
         return samples, estimate
-    active = block_order(active, width)
-    m = active.size
-    # running sums of the refined pixels, their centre sample included
-    sums = rgba[active].astype(np.float64)
-    zmin = z[active].copy()
-    slot = np.full(n_pix, -1, np.int64)
-    slot[active] = np.arange(m)
-    value = np.empty((m, 4), np.float32)
     offsets, totals = budget_offsets(cap)
-    if times_lens is not None:
+    if blurred:
         offsets = [o + tuple(s) for o, s in zip(offsets, times_lens)]
-    done = 1
-    live = np.arange(m)                                   # slots still above the budget
-    for total in totals:
-        if live.size == 0:
-            break
-        pixels = active[live]
-        # the estimate compares two halves: in a nested round, the centre and
-        # the first half of the pairs against the rest; in the last round, the
-        # samples before it against the plain set
-        half_at = done if total == totals[-1] else max((total - 1) // 2, done)
-        half = sums[live] if done == half_at else None
-        # the round's passes in groups of about one image's worth of samples:
-        # traced and shaded together, their shadow rays are one denser set
-        group = max(1, n_pix // pixels.size)
-        i = done
-        while i < total:
-            end = min(i + group, total)
-            if i < half_at < end:
-                end = half_at                              # a group ends at the half
-            for hit_pixel, rgb, depth in trace_passes(pixels, offsets[i:end]):
-                add_pass(pixels, slot, hit_pixel, rgb, depth, bg, sums, zmin, value)
-            if end == half_at:
-                half = sums[live]                          # a copy
-            i = end
-        done = total
-        samples[pixels] = done
-        if times_lens is not None and total == totals[0]:
-            # every pixel now holds the first round's times and lens points:
-            # the contrast of their means shows what the 1-spp image could
-            # not (an edge that covers a pixel for the first 5 % of the
-            # shutter, which all of its own samples missed), and it counts
-            # as the contrast of `done` samples
-            padded.reshape(height + 2, width + 2, 4)[1 + active // width, 1 + active % width] = sums / done
-            after = np.empty((height + 2) * (width + 2), np.float32)
-            neighbour_contrast(padded, width + 2, height + 2, after)
-            contrast = np.maximum(contrast, after.reshape(height + 2, width + 2)[1:-1, 1:-1].reshape(-1) * done)
-        err = np.maximum(half_difference(half, sums[live], half_at, done - half_at),
-                         contrast[pixels] / done)
-        estimate[pixels] = err
-        live = live[err > max_error]
-    rgba[active] = (sums / samples[active][:, None]).astype(np.float32)
-    z[active] = zmin
+    px = _Refined(rgba, z, n_pix)
+    live = px.add(block_order(start, width))
+    while live.size:
+        # each group of live pixels with one sample count to its next round
+        half_err = np.zeros(live.size)
+        for done in np.unique(px.count[live]):
+            group = np.flatnonzero(px.count[live] == done)
+            total = totals[int(np.searchsorted(totals, done, side="right"))]
+            half, half_at = _advance(px, live[group], total, offsets, totals, trace_passes, bg, n_pix)
+            half_err[group] = half_difference(half, px.sums[live[group]], half_at, total - half_at)
+        samples[px.pixels] = px.count
+        # the contrast on the refined means, against what each pixel had seen
+        padded.reshape(height + 2, width + 2, 4)[1 + px.pixels // width, 1 + px.pixels % width] = \
+            px.sums / px.count[:, None]
+        now = contrast_now()
+        more = now > seen
+        seen[more] = now[more]
+        weight[more] = np.maximum(weight[more], now[more].astype(np.float64) * samples[more])
+        estimate[px.pixels[live]] = half_err
+        estimate = np.maximum(estimate, (weight / samples).astype(np.float32))
+        # on: every pixel above the budget with samples left to take
+        wanted = (estimate > max_error) & (samples < totals[-1])
+        new = np.flatnonzero(wanted & (px.slot < 0))
+        on = np.sort(px.slot[np.flatnonzero(wanted & (px.slot >= 0))])      # slots are in block order
+        live = np.concatenate([on, px.add(block_order(new, width))]) if new.size else on
+    rgba[px.pixels] = (px.sums / px.count[:, None]).astype(np.float32)
+    z[px.pixels] = px.zmin
     return samples, estimate

@@ -57,6 +57,11 @@ def slerp(q0, q1, s):
     return out
 
 
+# a STEP sampler's key time matches the scene time within this many float32
+# ulps of the larger of the two (the file stores its times as float32)
+KEY_TIME_ULPS = 4
+
+
 class _Sampler:
     """One animation sampler: key times, values and interpolation."""
 
@@ -71,6 +76,12 @@ class _Sampler:
     def __call__(self, t):
         times, v = self.times, self.values
         key = (lambda i: v[i, 1]) if self.cubic else (lambda i: v[i])
+        if self.step:
+            # a time on a key (within the float32 rounding of the file's key
+            # times) takes that key: 25 keys at float32 linspace(0, 1, 25),
+            # each a hair above k / 24, would else hold the key before
+            near = KEY_TIME_ULPS * np.finfo(np.float32).eps * abs(t)
+            return key(max(0, int(np.searchsorted(times, t + near, side="right")) - 1))
         if t <= times[0] or len(times) == 1:
             return key(0)
         if t >= times[-1]:
@@ -78,8 +89,6 @@ class _Sampler:
         k = int(np.searchsorted(times, t, side="right")) - 1
         h = times[k + 1] - times[k]
         s = (t - times[k]) / h
-        if self.step:
-            return key(k)
         if self.cubic:   # Hermite with the stored out/in tangents, scaled by h
             s2, s3 = s * s, s * s * s
             out = ((2 * s3 - 3 * s2 + 1) * v[k, 1] + (s3 - 2 * s2 + s) * h * v[k, 2]
@@ -122,8 +131,12 @@ class GltfObject:
             raise SceneError(scene_path, key, f"{Path(path).name}: malformed glTF "
                                               f"({type(exc).__name__}: {exc})") from None
 
-    def _fail(self, problem):
-        raise SceneError(self.scene_path, self.key, f"{self.path.name}: {problem}")
+    def _fail(self, problem, key=None):
+        raise SceneError(self.scene_path, key or self.key, f"{self.path.name}: {problem}")
+
+    def _fail_animation(self, problem):
+        """An error of the file's animations: named under the object's `animation` key."""
+        self._fail(problem, self.key.rsplit(".", 1)[0] + ".animation")
 
     def _buffer(self, i, buf):
         if buf.uri is None:
@@ -401,15 +414,15 @@ class GltfObject:
         self.t0 = self.t1 = 0.0
         if not doc.animations:
             if which is not None and which != "all":          # all of none: a still object
-                self._fail(f"animation {which!r} requested, but the file has none")
+                self._fail_animation(f"animation {which!r} requested, but the file has none")
             return
         chosen = self._chosen(which)
         owner = {}
         for index in chosen:
             for target in sorted(self._driven(index)):
                 if target in owner:
-                    self._fail(f"animations {self._label(owner[target])} and {self._label(index)} both drive "
-                               f"node {target[0]}'s {target[1]}; choose one of them")
+                    self._fail_animation(f"animations {self._label(owner[target])} and {self._label(index)} both "
+                                         f"drive node {target[0]}'s {target[1]}; choose one of them")
                 owner[target] = index
         for index in range(len(doc.animations)):
             if index in chosen:
@@ -425,14 +438,24 @@ class GltfObject:
         starts, ends = [], []
         for index in chosen:
             anim = doc.animations[index]
-            for ch in anim.channels:
+            for c, ch in enumerate(anim.channels):
                 if ch.target.node is None or ch.target.path not in _PATHS:
                     continue
+                where = f"animation {self._label(index)} channel {c}"
+                if not 0 <= ch.target.node < len(doc.nodes):
+                    self._fail_animation(f"{where} targets node {ch.target.node}, but the file has "
+                                         f"{len(doc.nodes)} nodes")
+                if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
+                    self._fail_animation(f"{where} names sampler {ch.sampler}, but the animation has "
+                                         f"{len(anim.samplers)}")
                 smp = anim.samplers[ch.sampler]
                 times = self.accessor(smp.input).reshape(-1).astype(np.float64)
-                if np.any(np.diff(times) <= 0):
-                    self._fail(f"animation {self._label(index)} sampler {ch.sampler}: key times must increase")
                 values = self.accessor(smp.output).astype(np.float64)
+                for what, array in (("key times", times), ("key values", values)):
+                    if not np.all(np.isfinite(array)):
+                        self._fail_animation(f"{where}: its sampler {ch.sampler}'s {what} hold inf or NaN")
+                if np.any(np.diff(times) <= 0):
+                    self._fail_animation(f"{where}: sampler {ch.sampler}'s key times must increase")
                 self.channels.append((ch.target.node, ch.target.path,
                                       _Sampler(times, values, smp.interpolation or "LINEAR",
                                                ch.target.path == "rotation")))

@@ -8,18 +8,23 @@ from anim.render.renderer import SceneRenderer
 from anim.render.warm_up import warm_up
 from anim.render.settings import config_of, shading_of
 from anim.render.stats import fps_of, median_ms
+from anim.io.usd import USD_SUFFIXES
 from anim.scene import AnimatedScene
 from raycore.accelerators import packet_of
 
 from anim.measure.bench import warm_up_frames
 
-# each structure traces every ray of its frames, shadow rays included
+# the structures of the camera rays; the shadow rays of every row go through
+# one structure (the scene's, else the default), so that rows differ in
+# their camera rays alone
 STRUCTURES = {
-    "grid": {"accel": "grid", "shadow_accel": "grid"},
-    "grid-nocull": {"accel": "grid", "shadow_accel": "grid", "grid_cull": False},   # no culling, no mailboxes
-    "kdtree": {"accel": "kdtree", "shadow_accel": "kdtree"},
-    "bvh": {"accel": "bvh", "shadow_accel": "bvh"},
+    "grid": {"accel": "grid"},
+    "grid-nocull": {"accel": "grid", "grid_cull": False},   # no culling, no mailboxes
+    "kdtree": {"accel": "kdtree"},
+    "bvh": {"accel": "bvh"},
 }
+# what names a scene among the tokens: a scene file or a USD stage
+SCENE_SUFFIXES = (".yaml", ".yml", *USD_SUFFIXES)
 # Wald et al. 2006 (Coherent Grid Traversal), Table: ray/triangle tests per frame
 PUBLISHED_TESTS = {"grid-nocull": 14.0e6, "grid": 0.9e6, "kdtree": 0.85e6}
 
@@ -32,7 +37,7 @@ def parse_structures(tokens):
             continue
         if tok in STRUCTURES:
             names.append(tok)
-        elif path is None and (tok.endswith((".yaml", ".yml")) or "/" in tok):
+        elif path is None and (tok.lower().endswith(SCENE_SUFFIXES) or "/" in tok):
             path = tok
         else:
             raise ValueError(f"unknown structure {tok!r}; known: {', '.join(STRUCTURES)} (and 'vs')")
@@ -50,17 +55,21 @@ def compare_size(scene, res):
     return res, max(1, round(res * h / w))
 
 
-def compare(path, names, n_frames, res, threads, label=None):
-    """{'rows': [...per structure...], 'diff': [...vs the first...]}; the
-    image is `res` pixels wide (None: the scene's resolution), the scene
-    named `label` (default: its path)."""
-    scene = AnimatedScene(path)
+def compare(path, names, n_frames, res, threads, label=None, shadow_accel=None, camera=None):
+    """{'rows': [...per structure...], 'diff': [...vs the first...],
+    'shadow_accel': ...}; the image is `res` pixels wide (None: the scene's
+    resolution), the scene named `label` (default: its path). Every row's
+    shadow rays go through `shadow_accel` (None: the scene's structure for
+    them, else the default)."""
+    scene = AnimatedScene(path, camera)
     frames = scene.frame_numbers[:max(1, n_frames)]
     width, height = compare_size(scene, res)
     shading = shading_of(scene)                 # textures read once, for every structure
     rows, images = [], {}
+    shadows = shadow_accel or config_of(scene).shadow_structure
     for name in names:
-        cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), **STRUCTURES[name])
+        cfg = config_of(scene, width=width, height=height, threads=threads, aovs=(), shadow_accel=shadows,
+                        **STRUCTURES[name])
         warm_up(scene, shading, cfg, scene.time_of(frames[0]))       # a cold cache: two processes
         renderer = SceneRenderer(scene, cfg, shading)
         for frame in warm_up_frames(scene):                           # warm up the frame loop
@@ -95,4 +104,4 @@ def compare(path, names, n_frames, res, threads, label=None):
                       "pixels_depth_diff_over_1e-5": int(np.sum(rel > 1e-5)),
                       "max_rgba_diff": float(np.abs(ref.rgba - img.rgba).max()),
                       "pixels_rgba_diff_over_1e-2": int(np.sum(np.abs(ref.rgba - img.rgba).max(axis=-1) > 1e-2))})
-    return {"scene": label or str(path), "rows": rows, "diff": diffs}
+    return {"scene": label or str(path), "shadow_accel": shadows, "rows": rows, "diff": diffs}

@@ -70,6 +70,12 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     problem = stats_owner_problem(previous, scene)
     if problem:
         raise SceneError(job.stats_path, "", problem)
+    shading = None
+    if client is None:
+        # refused before any file or folder is made: a texture that cannot be
+        # read, a render that would not fit in memory
+        shading = shading_of(scene)
+        check_memory(scene, cfg)
     checksums = {r["frame"]: r["crc32"] for r in (previous or {}).get("frames", [])
                  if isinstance(r.get("crc32"), int)} if job.resume else {}
     todo = plan_frames(scene, job.out_dir, job.frames, job.resume, job.overwrite, cfg, warn, checksums)
@@ -119,7 +125,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     ended, extra = "complete", {"compile_s": 0.0}
     try:
         if client is None:
-            _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, on_compile)
+            _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, shading, on_compile)
         else:
             extra.update(_render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run_info))
     except BaseException as exc:
@@ -144,12 +150,10 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     return stats
 
 
-def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, on_compile=None) -> None:
+def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, shading, on_compile=None) -> None:
     """Frames in this process, written by a writer thread; the compile
     (warm-up) seconds go into extra["compile_s"] as soon as they are known."""
     scene, cfg = job.scene, job.cfg
-    shading = shading_of(scene)
-    check_memory(scene, cfg)
     if todo.first() is None:
         return
     with watching(on_compile) as watch:

@@ -128,7 +128,9 @@ def check_memory(scene, cfg, available=None):
     need = pixels * per_pixel + scene.faces.shape[0] * BYTES_PER_TRIANGLE
     available = available_bytes() if available is None else available
     if available is not None and need > 0.9 * available:
-        raise SceneError(scene.path, "output.resolution",
+        # the size is the scene's unless --res changed it
+        key = "output.resolution" if [cfg.width, cfg.height] == list(scene.spec.output.resolution) else "--res"
+        raise SceneError(scene.path, key,
                          f"{cfg.width}x{cfg.height} with {scene.faces.shape[0]:,} triangles needs about "
                          f"{_size(need)} of work memory; {_size(available)} are available")
     return need

@@ -97,7 +97,7 @@ def test_static_gltf_is_placed_once_and_animation_selection(tmp_path):
     assert scene.objects[0].static and not scene.moving
     np.testing.assert_allclose(scene.vertices_at(0.0), TRI + [0, 0, 1])
     res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, "still.glb", "    animation: walk\n"))])
-    assert res.exit_code == 2 and "objects.0.mesh" in res.output and "walk" in res.output
+    assert res.exit_code == 2 and "objects.0.animation" in res.output and "walk" in res.output
 
 
 def test_gltf_object_renders_end_to_end(tmp_path):
@@ -113,3 +113,45 @@ def test_gltf_object_renders_end_to_end(tmp_path):
     names, pixels, _ = read_exr(str(tmp_path / "out" / "f_1.exr"))
     coverage = float(np.mean(pixels[..., names.index("A")]))
     assert 0.05 < coverage < 0.9, coverage
+
+
+def test_a_step_key_is_taken_on_its_own_frame(tmp_path):
+    """25 STEP keys at float32 linspace(0, 1, 25), rendered at 24 fps: frame
+    f shows key f, although the stored key time is a hair above f / 24 on
+    about a third of the keys (it held the key before there)."""
+    times = np.linspace(0, 1, 25, dtype=np.float32)
+    assert np.sum(times.astype(np.float64) > np.arange(25) / 24) > 3     # the case this is about
+    b = GltfBuilder()
+    node = b.node(mesh=b.mesh(TRI, [0, 1, 2]))
+    b.animation([(node, "translation", times, np.c_[np.arange(25.0), np.zeros(25), np.zeros(25)], "STEP")])
+    b.save(tmp_path / "steps.glb", [node])
+    scene = AnimatedScene(_scene(tmp_path, "steps.glb"))
+    for f in range(25):
+        assert scene.vertices_at(f / 24)[0, 0] == pytest.approx(f), f
+        assert scene.vertices_at(f / 24 + 0.02)[0, 0] == pytest.approx(f), f      # held until the next key
+
+
+@pytest.mark.parametrize("fault,message", [
+    ("node", "targets node 7, but the file has 1 nodes"),
+    ("nan", "hold inf or NaN"),
+    ("inf_time", "hold inf or NaN"),
+])
+def test_a_broken_animation_is_one_line_from_check_and_render(tmp_path, fault, message):
+    """A channel aimed at a node the file lacks, or inf/NaN among a sampler's
+    keys: exit 2 naming objects.0.animation, from check and render alike
+    (what check passes, render accepts)."""
+    b = GltfBuilder()
+    node = b.node(mesh=b.mesh(TRI, [0, 1, 2]))
+    path, values, times = "translation", np.zeros((2, 3)), [0.0, 1.0]
+    if fault == "nan":             # a rotation: its accessor has no min and max, which JSON could not hold
+        path, values = "rotation", np.array([[0, 0, 0, 1.0], [np.nan, 0, 0, 1]])
+    if fault == "inf_time":
+        times = [0.0, np.inf]
+    b.animation([(7 if fault == "node" else node, path, times, values, "LINEAR")])
+    b.save(tmp_path / "broken.glb", [node])
+    path = _scene(tmp_path, "broken.glb")
+    for command in (["check", str(path)], ["render", str(path), "-o", str(tmp_path / "out"), "-q"]):
+        res = CliRunner().invoke(main, command)
+        assert res.exit_code == 2, (command, res.output)
+        assert "objects.0.animation" in res.output and message in res.output, res.output
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.exr"))

@@ -123,3 +123,23 @@ def test_bench_and_compare_say_what_they_did(tmp_path):
     assert all(w in helptext for w in ("image error", "float precision", "minutes", "--quick --scene torus --res 64"))
     res = CliRunner().invoke(main, ["bench", "--error", "--scene", "demo"], prog_name="frustrace")
     assert res.exit_code == 2 and "exact motion" in res.output          # at once, not after the studies
+
+
+def test_compare_takes_a_usd_stage_and_one_shadow_structure_for_every_row(tmp_path):
+    """compare takes what render takes (a USD stage too), and its rows
+    differ in their camera rays alone: every row's shadow rays go through
+    the default structure (or --shadow-accel's), and the table says so."""
+    pytest.importorskip("pxr")
+    from usd_files import shot
+    stage = tmp_path / "shot.usda"
+    shot(stage)
+    out = tmp_path / "c.json"
+    res = run("compare", "grid", "vs", "bvh", stage, "--frames", "1", "--res", "40", "--json", out)
+    assert res.exit_code == 0, res.output
+    result = json.loads(out.read_text())
+    assert result["shadow_accel"] == "bvh" and "shadow rays of every row through the bvh" in res.output
+    assert [r["structure"] for r in result["rows"]] == ["grid", "bvh"]
+    res = run("compare", "grid", "vs", "kdtree", stage, "--frames", "1", "--res", "40", "--shadow-accel", "grid",
+              "--json", out)
+    assert res.exit_code == 0 and json.loads(out.read_text())["shadow_accel"] == "grid", res.output
+    assert "bvh" in run("compare", "--help").output

@@ -285,11 +285,15 @@ def test_a_render_that_would_not_fit_in_memory_is_refused_with_the_estimate(tmp_
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "huge"), "--res", "16384x16384", "-q"])
     if anim.render.renderer.available_bytes() and anim.render.renderer.available_bytes() < 60 * 1024 ** 3:
         assert res.exit_code == 2 and "GiB of work memory" in res.output, res.output
-    # a normal frame on a machine that has (pretended) 50 MB left: refused before the first frame
+    # a normal frame on a machine that has (pretended) 50 MB left: refused
+    # before anything is made (no folder, no stats.json), naming the option
+    # the size came from
     monkeypatch.setattr(anim.render.renderer, "available_bytes", lambda: 50 * 1024 ** 2)
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "out"), "--res", "1024x1024", "-q"])
-    assert res.exit_code == 2 and "output.resolution" in res.output and "50 MiB are available" in res.output
-    assert not list((tmp_path / "out").glob("*.exr")) if (tmp_path / "out").exists() else True
+    assert res.exit_code == 2 and ": --res: 1024x1024" in res.output and "50 MiB are available" in res.output
+    assert not (tmp_path / "out").exists()
+    res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "out"), "-q"])
+    assert res.exit_code == 2 and ": output.resolution: " in res.output and not (tmp_path / "out").exists()
     monkeypatch.setattr(anim.render.renderer, "available_bytes", lambda: 8 * 1024 ** 3)
     res = CliRunner().invoke(main, ["render", str(DEMO), "-o", str(tmp_path / "ok"), "--res", "64x48",
                                     "--frames", "0:0", "-q"])
