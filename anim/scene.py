@@ -22,6 +22,7 @@ from anim.rig import Skeleton
 from anim.rigid_batch import RigidBatch
 from anim.schema import SceneFile, parse_scene
 from anim.io.usd import UsdObject, is_usd, scene_of_stage
+from anim.io.usd import dependencies as usd_dependencies
 from anim.tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from anim.vertex_kernels import skin_into, transform_into
 
@@ -267,6 +268,9 @@ class AnimatedScene:
             uvs.append((obj.uvs, len(obj.base)))
             offset += len(obj.base)
             self.objects.append(obj)
+        for i, o in enumerate(self.objects):
+            for note in (o.usd.notes if o.usd is not None else ()):
+                self.warnings.append(f"objects.{i}.mesh: {note}")
         subdivided = [(i, p) for i, o in enumerate(self.objects) if o.usd is not None for p in o.usd.subdivided]
         if subdivided:
             self.warnings.append(f"objects.{subdivided[0][0]}.mesh: {len(subdivided)} USD mesh(es) ask for a "
@@ -350,6 +354,13 @@ class AnimatedScene:
                 refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
             if o.skeleton:
                 refs.append((f"objects.{i}.skeleton.weights", o.skeleton.weights))
+        # what a USD file brings along (sublayers, references, textures) travels with it
+        seen = set()
+        for i, o in enumerate(spec.objects):
+            stage = (base / o.mesh).resolve() if o.mesh and is_usd(o.mesh) else None
+            if stage is not None and stage not in seen and stage.is_file():
+                seen.add(stage)
+                refs += [(f"objects.{i}.mesh", str(dep)) for dep in usd_dependencies(stage) if dep != stage]
         return [(key, ref) for key, ref in refs if not (base / ref).resolve().is_relative_to(base)]
 
     def check_camera(self, frames):
@@ -406,10 +417,19 @@ class AnimatedScene:
         return v
 
     def _warn_outside_keys(self):
-        """A warning for every keyed motion that the frame range runs past
-        (clamped: held still before the first key or after the last)."""
+        self.warnings += self.keys_outside(self.spec.frames.start, self.spec.frames.end)
+
+    def keys_outside(self, first, last) -> list:
+        """A warning for every keyed motion that frames first..last run past
+        (clamped: held still before the first key or after the last), and for
+        every USD stage whose time code range they run past."""
         spec = self.spec
-        t0, t1 = self.time_of(spec.frames.start), self.time_of(spec.frames.end)
+        t0, t1 = self.time_of(first), self.time_of(last)
+        out = []
+        for key, (s0, s1) in self._usd_ranges().items():
+            if t0 < s0 - 1e-9 or t1 > s1 + 1e-9:
+                out.append(f"{key}: frames {first}..{last} run over t = {t0:g}..{t1:g}, the USD stage's time "
+                           f"codes only cover {s0:g}..{s1:g}: its meshes hold their first or last samples outside")
         ranges = []
         if spec.camera.keys:
             ranges.append(("camera.keys", [k.t for k in spec.camera.keys], "clamp"))
@@ -422,9 +442,22 @@ class AnimatedScene:
                     ranges.append((f"objects.{i}.transform.{name}", [r[0] for r in track.keys], o.extrapolate))
         for key, times, extrapolate in ranges:
             if len(times) > 1 and extrapolate == "clamp" and (t0 < min(times) or t1 > max(times)):
-                self.warnings.append(f"{key}: frames {spec.frames.start}..{spec.frames.end} run over "
-                                     f"t = {t0:g}..{t1:g}, keys only cover {min(times):g}..{max(times):g}: "
-                                     "held still outside")
+                out.append(f"{key}: frames {first}..{last} run over t = {t0:g}..{t1:g}, keys only cover "
+                           f"{min(times):g}..{max(times):g}: held still outside")
+        return out
+
+    def _usd_ranges(self) -> dict:
+        """{key: (t0, t1)} of the USD stages whose meshes move, by the stage's
+        authored time code range (one per stage file)."""
+        ranges, seen = {}, set()
+        for i, o in enumerate(self.objects):
+            if o.usd is None or o.static or o.usd.path in seen:
+                continue
+            seen.add(o.usd.path)
+            span = o.usd.time_range()
+            if span is not None:
+                ranges[f"objects.{i}.mesh"] = span
+        return ranges
 
     @property
     def moving_triangles(self):

@@ -173,6 +173,17 @@ def _resolution(text):
     return size
 
 
+def _aovs(text):
+    """--aov N,P,id as a tuple, or None when not given."""
+    if text is None:
+        return None
+    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    unknown = [n for n in names if n not in ("N", "P", "id")]
+    if unknown or not names:
+        raise click.BadParameter(f"{', '.join(unknown) or text!r}: the AOVs are N, P and id", param_hint="--aov")
+    return names
+
+
 def parse_frames(text, scene):
     if text is None:
         return scene.frame_numbers
@@ -212,6 +223,9 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
 @click.option("--shutter", type=click.FloatRange(0, 1000), metavar="S", callback=lambda ctx, param, v: _finite(v, "--shutter"),
               help="Motion blur: the shutter is open S frame intervals (default: render.motion_blur.shutter, "
                    "0 = off; 0.5 = a 180-degree shutter). Each of the --spp passes takes one time in it.")
+@click.option("--aov", "aovs", metavar="N,P,id", callback=lambda ctx, param, v: _aovs(v),
+              help="Extra EXR channels, as output.aovs (default: output.aovs, none for a USD stage): "
+                   "N (smooth normal), P (position), id (triangle index).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames); merged with an earlier run's by frame number.")
 @click.option("--resume", is_flag=True, help="Skip frames already written whole (a truncated or foreign file is rendered again); "
                                             "--resume renders into one directory share the frames.")
@@ -253,6 +267,9 @@ def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrit
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too
+    if frames_text is not None:                # the scene's own range was checked as it loaded
+        for note in scene.keys_outside(frames[0], frames[-1]):
+            click.echo(f"frustrace: warning: {note}", err=True)
     if not (workers or scheduler):
         ctx = click.get_current_context()
         given = [name for name, param in (("--chunk", "chunk"), ("--tls-ca", "tls_ca"), ("--tls-cert", "tls_cert"),

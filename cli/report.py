@@ -50,12 +50,14 @@ def progress(n_frames, show):
         yield on_frame, on_compile
 
 
-def fitted_table(title, columns, rows, width) -> Table:
+def fitted_table(title, columns, rows, width, key=()) -> Table:
     """A table that fits `width` columns without cutting a cell: every
     column is at least as wide as its widest cell (headers fold at spaces),
     and while the table is too wide the columns with the lowest keep rank
     are left out (rank None: always kept), said in the caption. rich alone
-    shrank cells to "de…" and numbers to "0.…".
+    shrank cells to "de…" and numbers to "0.…". A column among `key` (the
+    headers that say what a row is) stays while leaving it out would make
+    two rows read alike there.
     columns: [(header, rank)]; rows: lists of cell strings."""
     natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]
     need = [max([len(w) for w in h.split()] + [len(r[i]) for r in rows]) for i, (h, _) in enumerate(columns)]
@@ -64,8 +66,15 @@ def fitted_table(title, columns, rows, width) -> Table:
         need = natural                   # room for every header on one line
     dropped = []
     droppable = sorted((rank, i) for i, (_, rank) in enumerate(columns) if rank is not None)
+    key_at = [i for i, (h, _) in enumerate(columns) if h in key]
+
+    def tells_rows_apart(i):
+        rest = [j for j in key_at if j in keep and j != i]
+        return len({tuple(r[j] for j in rest) for r in rows}) < len({tuple(r[j] for j in rest + [i]) for r in rows})
     while sum(need[i] + 3 for i in keep) + 1 > width and droppable:
         _, i = droppable.pop(0)
+        if i in key_at and tells_rows_apart(i):
+            continue
         keep.remove(i)
         dropped.append(columns[i][0])
     table = Table(title=title, caption=(f"narrow terminal: {', '.join(dropped)} left out (a wider terminal "
@@ -127,8 +136,9 @@ def bench_table(rows, console=None):
         if not console.is_terminal:
             console = Console(width=210)  # a pipe or file gets the whole table
     console.print(fitted_table("frustrace bench (median ms per frame; compile time excluded)", columns, cells,
-                               console.width))
-    bvh = [r for r in rows if "bvh_build_ms" in r]
+                               console.width, key=("scene", "accel", "shadows", "res", "packet", "threads")))
+    # the BVH's figures once a scene (its rows of other packets build the same trees)
+    bvh = list({r["scene"]: r for r in reversed([r for r in rows if "bvh_build_ms" in r])}.values())[::-1]
     for r in bvh:
         console.print(f"{r['scene']}: BVH build {r['bvh_build_ms']:.2f} ms ({r['bvh_build_ms_per_100k']:.2f} "
                       f"per 100K triangles), refit {r['bvh_refit_ms']:.2f} ms of "

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from anim.errors import SceneError
+from anim.io.polygons import triangulate
 from anim.materials import DEFAULT_MATERIAL, pbr_material
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -70,19 +71,56 @@ def _apply(points, m):
     return points @ m[:3, :3] + m[3, :3]
 
 
-def _triangulate(counts, indices, path, scene_path, key):
-    """Triangles (fans) of polygons; (faces (n_t, 3), corner (n_t, 3) index
-    into faceVertexIndices, polygon of each triangle)."""
+def _triangulate(counts, indices, points, path, scene_path, key):
+    """Triangles of polygons (fans, ear clipping for concave ones:
+    polygons.py); (faces (n_t, 3), corner (n_t, 3) index into
+    faceVertexIndices, polygon of each triangle)."""
     counts = np.asarray(counts, np.int64)
     indices = np.asarray(indices, np.int64)
     if counts.sum() != len(indices) or np.any(counts < 0):
         raise SceneError(scene_path, key, f"{path}: faceVertexCounts do not add up to faceVertexIndices")
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    n_tri = np.maximum(counts - 2, 0)
-    poly = np.repeat(np.arange(len(counts)), n_tri)
-    k = np.arange(n_tri.sum()) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)      # triangle within polygon
-    corner = np.stack([starts[poly], starts[poly] + k + 1, starts[poly] + k + 2], axis=1)
-    return indices[corner], corner, poly
+    if len(indices) and (indices.max() >= len(points) or indices.min() < 0):
+        raise SceneError(scene_path, key, f"{path}: a face index is beyond its {len(points)} points")
+    return triangulate(counts, indices, points)
+
+
+def _topology(mesh, path, scene_path, key):
+    """(faceVertexCounts, faceVertexIndices) at the default time; topology
+    authored only as time samples is named as such (it is not read)."""
+    counts_attr, indices_attr = mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()
+    counts, indices = counts_attr.Get(), indices_attr.Get()
+    if counts is None or indices is None:
+        if counts_attr.GetNumTimeSamples() or indices_attr.GetNumTimeSamples():
+            raise SceneError(scene_path, key, f"{path}: its topology (faceVertexCounts, faceVertexIndices) is "
+                                              "authored only as time samples; time-varying topology is not "
+                                              "supported: author it at the default time")
+        raise SceneError(scene_path, key, f"{path}: the mesh has no faces")
+    return counts, indices
+
+
+def _authored_normals(prim, corner, poly, pxr):
+    """Per-corner normal ids (n_t, 3) where the mesh's authored normals
+    (primvars:normals, else normals) differ between the corners of one point
+    (faceVarying or uniform: hard edges), else None. The points are split
+    along those seams; the smooth normal within a seam is the geometry's."""
+    api = pxr.UsdGeom.PrimvarsAPI(prim)
+    mesh = pxr.UsdGeom.Mesh(prim)
+    if api.HasPrimvar("normals") and api.GetPrimvar("normals").HasAuthoredValue():
+        primvar = api.GetPrimvar("normals")
+        values, interp = primvar.ComputeFlattened(), primvar.GetInterpolation()
+    else:
+        values, interp = mesh.GetNormalsAttr().Get(), mesh.GetNormalsInterpolation()
+    if values is None or len(values) == 0 or interp not in ("faceVarying", "uniform"):
+        return None
+    normals = np.asarray(values, np.float64).reshape(-1, 3)
+    # a normal id per distinct direction (rounded: the same normal written twice)
+    _, ids = np.unique(np.round(normals, 6), axis=0, return_inverse=True)
+    ids = ids.reshape(-1)
+    if interp == "uniform" and len(normals) == int(poly.max(initial=-1)) + 1:
+        return np.repeat(ids[poly][:, None], 3, axis=1)        # one normal a polygon
+    if interp == "faceVarying" and len(normals) == int(corner.max(initial=-1)) + 1:
+        return ids[corner]
+    return None
 
 
 class _Mesh:
@@ -98,24 +136,30 @@ class _Mesh:
         if rest is None or len(rest) == 0:
             raise SceneError(scene_path, key, f"{self.path}: the mesh has no points")
         rest = np.asarray(rest, np.float64)
-        counts = mesh.GetFaceVertexCountsAttr().Get()
-        indices = mesh.GetFaceVertexIndicesAttr().Get()
-        if counts is None or indices is None:
-            raise SceneError(scene_path, key, f"{self.path}: the mesh has no faces")
-        faces, corner, self.poly = _triangulate(counts, indices, self.path, scene_path, key)
-        if len(faces) and (faces.max() >= len(rest) or faces.min() < 0):
-            raise SceneError(scene_path, key, f"{self.path}: a face index is beyond its {len(rest)} points")
+        counts, indices = _topology(mesh, self.path, scene_path, key)
+        faces, corner, self.poly = _triangulate(counts, indices, rest, self.path, scene_path, key)
+        holes = mesh.GetHoleIndicesAttr().Get()
+        self.notes = ([f"{self.path}: {len(holes)} holeIndices are not supported: those faces render solid"]
+                      if holes is not None and len(holes) else [])
         self.n_points = len(rest)
         self.skinning = skinning
         if skinning is None:
             _check_unbound_skin(prim, pxr, scene_path, key)
         self.materials = _bound_materials(prim, len(counts), self.poly, scene_path, key)
         # texture coordinates only where a bound material has a texture
-        self.point_of = None                 # vertex -> point, where face-varying UVs split points
+        self.point_of = None                 # vertex -> point, where face-varying UVs or normals split points
         self.uvs = None
+        corner_uv = None
         if any(m["texture"] is not None for m in self.materials[1]):
-            self.uvs, faces = self._uvs(prim, faces, corner, scene_path, key)
+            self.uvs, corner_uv = self._uvs(prim, faces, corner, scene_path, key)
+        seams = _authored_normals(prim, corner, self.poly, pxr)
+        if corner_uv is not None or seams is not None:
+            faces = self._split(faces, corner_uv, seams)
         self.faces = np.ascontiguousarray(faces, np.int32)
+        # visibility that changes over time (its own or an ancestor's): the
+        # mesh is collapsed to a point (no triangle of it can be hit) where hidden
+        self.hides = any(pxr.UsdGeom.Imageable(p).GetVisibilityAttr().ValueMightBeTimeVarying()
+                         for p in _ancestors(prim) if p.IsA(pxr.UsdGeom.Imageable))
         varying = self.points_attr.ValueMightBeTimeVarying()
         placed_by = prim                     # the prim whose transform places the points
         if skinning is not None:
@@ -125,7 +169,7 @@ class _Mesh:
                                        or anim.BlendShapeWeightsMightBeTimeVarying())
         moving_xform = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
                            for p in _ancestors(placed_by) if p.IsA(UsdGeom.Xformable))
-        self.static = not (varying or moving_xform)
+        self.static = not (varying or moving_xform or self.hides)
         self.rigid = not varying and skinning is None
 
     def _uvs(self, prim, faces, corner, scene_path, key):
@@ -138,26 +182,38 @@ class _Mesh:
                 primvar = api.GetPrimvar(name)
                 break
         if primvar is None:
-            return None, faces
+            return None, None
         values = primvar.ComputeFlattened()
         if values is None:
-            return None, faces
+            return None, None
         uv = np.asarray(values, np.float64).reshape(-1, 2)
         interp = primvar.GetInterpolation()
         if interp in ("vertex", "varying") and len(uv) == self.n_points:
-            return uv.astype(np.float32), faces
+            return uv.astype(np.float32), None
         if interp == "faceVarying" and len(uv) == int(corner.max(initial=-1)) + 1:
-            # a vertex per distinct (point, uv) pair: points split only along UV seams
-            pairs = np.stack([faces.reshape(-1), corner.reshape(-1)], axis=1)
-            uv_of_corner = uv[pairs[:, 1]]
-            keyed = np.concatenate([pairs[:, :1].astype(np.float64), uv_of_corner], axis=1)
-            unique, first, inverse = np.unique(keyed, axis=0, return_index=True, return_inverse=True)
-            self.point_of = unique[:, 0].astype(np.int64)
-            return uv_of_corner[first].astype(np.float32), inverse.reshape(-1, 3)
+            return None, uv[corner.reshape(-1)]          # per corner: split along its seams (_split)
         if interp == "constant" or len(uv) == 1:
-            return np.repeat(uv[:1], self.n_points, axis=0).astype(np.float32), faces
+            return np.repeat(uv[:1], self.n_points, axis=0).astype(np.float32), None
         raise SceneError(scene_path, key, f"{self.path}: primvar {primvar.GetPrimvarName()} has "
                                           f"{interp} interpolation with {len(uv)} values; not supported")
+
+    def _split(self, faces, corner_uv, seams):
+        """Faces over vertices that split points where a corner's UV (per
+        corner, face-varying) or authored normal (seams: a normal id per
+        corner) differs: a vertex per distinct (point, uv, normal)."""
+        columns = [faces.reshape(-1, 1).astype(np.float64)]
+        if corner_uv is not None:
+            columns.append(corner_uv)
+        elif self.uvs is not None:
+            columns.append(self.uvs[faces.reshape(-1)].astype(np.float64))
+        if seams is not None:
+            columns.append(seams.reshape(-1, 1).astype(np.float64))
+        keyed = np.concatenate(columns, axis=1)
+        unique, inverse = np.unique(keyed, axis=0, return_inverse=True)
+        self.point_of = unique[:, 0].astype(np.int64)
+        if len(columns) > 1 and (corner_uv is not None or self.uvs is not None):
+            self.uvs = unique[:, 1:3].astype(np.float32)
+        return inverse.reshape(-1, 3)
 
     @property
     def n_vertices(self):
@@ -184,6 +240,8 @@ class _Mesh:
         else:
             world = _matrix(xform_cache.GetLocalToWorldTransform(self.prim))
         pts = _apply(np.asarray(points, np.float64), world)
+        if self.hides and pxr.UsdGeom.Imageable(self.prim).ComputeVisibility(time) == pxr.UsdGeom.Tokens.invisible:
+            pts[:] = pts.mean(axis=0)         # hidden at this time: every triangle degenerate, never hit
         return pts if self.point_of is None else pts[self.point_of]
 
 
@@ -268,6 +326,8 @@ def material_of(material, scene_path, key):
             asset, _ = _input_value(tex, "file")
             if asset is not None and asset.resolvedPath:
                 texture = _texture_source(asset.resolvedPath, pxr)
+            elif asset is not None and asset.path:
+                raise SceneError(scene_path, key, f"{tex.GetPath()}: texture file not found: {asset.path}")
             cs, _ = _input_value(tex, "sourceColorSpace")
             space = "linear" if cs == "raw" else ("srgb" if cs == "sRGB" else "auto")
             _, reader = _input_value(tex, "st")
@@ -328,15 +388,17 @@ def mesh_prims(stage, root, scene_path, key):
     for prim in it:
         if prim.IsInstance():
             raise SceneError(scene_path, key, f"{prim.GetPath()} is instanceable (a USD instance); "
-                                              "instances are not rendered: make the prim not instanceable "
-                                              "or flatten the stage (usdcat --flatten)")
+                                              "instanced prims are not rendered yet")
         if prim.IsA(UsdGeom.PointInstancer):
             raise SceneError(scene_path, key, f"{prim.GetPath()} is a PointInstancer; point instancers are "
                                               "not rendered")
         if prim.IsA(UsdGeom.Imageable):
             img = UsdGeom.Imageable(prim)
-            if img.ComputeVisibility() == UsdGeom.Tokens.invisible or \
-                    img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+            # hidden for good (not by time samples: those meshes hide per frame, _Mesh.hides)
+            hidden = img.ComputeVisibility() == UsdGeom.Tokens.invisible and not any(
+                UsdGeom.Imageable(p).GetVisibilityAttr().ValueMightBeTimeVarying()
+                for p in _ancestors(prim) if p.IsA(UsdGeom.Imageable))
+            if hidden or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
                 it.PruneChildren()
                 continue
         if prim.IsA(UsdGeom.Mesh):
@@ -365,6 +427,7 @@ class UsdObject:
         skinned = _skinning_targets(self.stage, cache, pxr)
         self.tcps = self.stage.GetTimeCodesPerSecond() or 24.0
         self.meshes = [_Mesh(p, skinned.get(str(p.GetPath())), scene_path, key) for p in prims]
+        self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
         self.subdivided = [m.path for m in self.meshes
                            if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
@@ -387,6 +450,12 @@ class UsdObject:
         self.static = all(m.static for m in self.meshes)
         self.rigid = all(m.rigid for m in self.meshes)     # moved by transforms only
         self.rest = self._evaluate(0.0, every=True)
+
+    def time_range(self):
+        """(t0, t1) in seconds of the stage's authored time code range, or None."""
+        if not self.stage.HasAuthoredTimeCodeRange():
+            return None
+        return self.stage.GetStartTimeCode() / self.tcps, self.stage.GetEndTimeCode() / self.tcps
 
     def time_code(self, t):
         return self.pxr.Usd.TimeCode(t * self.tcps)

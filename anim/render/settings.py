@@ -26,7 +26,8 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
 
 
 def render_config(scene: AnimatedScene, *, accel=None, shadow_accel=None, packet=None, threads=0, workers=None,
-                  scheduler=None, spp=None, max_error=None, no_shadows=False, res=None, shutter=None) -> tuple:
+                  scheduler=None, spp=None, max_error=None, no_shadows=False, res=None, shutter=None,
+                  aovs=None) -> tuple:
     """(RenderConfig, warnings) of `frustrace render`: the scene's settings
     with the options given, the render threads set (a local cluster's
     workers share the cores; a remote worker takes all of its machine's),
@@ -47,7 +48,7 @@ def render_config(scene: AnimatedScene, *, accel=None, shadow_accel=None, packet
     width, height = res if res else (None, None)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp, max_error=max_error,
                     shadows=scene.spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
-                    width=width, height=height, shutter=shutter)
+                    width=width, height=height, shutter=shutter, aovs=aovs)
     if (blur := one_pass_blur_warning(cfg)) is not None:
         warnings.append(blur)
     return cfg, warnings

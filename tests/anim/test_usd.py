@@ -304,3 +304,174 @@ def test_the_cameras_lens_and_shutter_become_depth_of_field_and_motion_blur(tmp_
     assert res.exit_code == 0, res.output
     frame = json.loads((out / "stats.json").read_text())["frames"][0]
     assert frame["time_samples"] == 4 and frame["lens_samples"] == 4
+
+
+def _cube(stage, path, normals=None):
+    """A unit cube of 8 shared points and 6 quads; normals: None, or
+    (interpolation, values) authored on it."""
+    pts = [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    m = mesh(stage, path, pts, [4] * 6, [i for q in quads for i in q])
+    m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    if normals is not None:
+        interp, values = normals
+        m.CreateNormalsAttr(Vt.Vec3fArray([Gf.Vec3f(*n) for n in values]))
+        m.SetNormalsInterpolation(interp)
+    return m, quads
+
+
+def _smooth_normals(scene):
+    """The renderer's vertex normals of the scene's rest pose."""
+    from raycore.geometry.mesh import vertex_face_csr, vertex_normals
+    verts = scene.vertices_at(0.0).astype(np.float32)
+    tri = np.ascontiguousarray(verts[scene.faces].reshape(-1, 9))
+    start, faces = vertex_face_csr(scene.faces, len(verts))
+    normals = np.empty((len(verts), 3), np.float32)
+    vertex_normals(tri, start, faces, normals)
+    return verts, normals
+
+
+@pytest.mark.parametrize("interp", ["faceVarying", "uniform"])
+def test_authored_face_normals_give_a_cube_hard_edges(tmp_path, interp):
+    """A cube whose authored normals are the faces' own (faceVarying or
+    uniform): every corner's smooth normal is its face's normal, not the
+    average of three faces (the smooth blob it shaded as); without authored
+    normals it stays one shared point a corner."""
+    stage = new_stage(tmp_path / "cube.usda")
+    face_n = [[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]]
+    values = [n for n in face_n for _ in range(4)] if interp == "faceVarying" else face_n
+    _cube(stage, "/Cube", (interp, values))
+    _cube(stage, "/Plain")
+    stage.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "cube.usda", "    prim: /Cube\n"))
+    assert scene.n_vertices == 24 and scene.faces.shape == (12, 3)
+    verts, normals = _smooth_normals(scene)
+    for tri in scene.faces:
+        a, b, c = verts[tri].astype(np.float64)
+        n = np.cross(b - a, c - a)
+        n /= np.linalg.norm(n)
+        np.testing.assert_allclose(normals[tri], np.repeat(n[None], 3, axis=0), atol=1e-6)
+    plain = AnimatedScene(_scene(tmp_path, "cube.usda", "    prim: /Plain\n"))
+    assert plain.n_vertices == 8
+
+
+def test_a_concave_polygon_is_ear_clipped_and_a_convex_one_keeps_its_fan(tmp_path):
+    """An L-shaped hexagon: its triangles cover the L exactly (area 3, none
+    outside it), where a fan from its first corner covered the notch; a
+    convex pentagon keeps the fan from its first corner."""
+    from anim.io.polygons import fan, triangulate
+    stage = new_stage(tmp_path / "l.usda")
+    ell = [[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]]
+    mesh(stage, "/L", ell, [6], [0, 1, 2, 3, 4, 5])
+    stage.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "l.usda"))
+    verts = scene.vertices_at(0.0).astype(np.float64)
+    tris = verts[scene.faces]
+    areas = 0.5 * np.abs(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])[:, 2])
+    assert len(tris) == 4 and abs(areas.sum() - 3.0) < 1e-9
+    centroids = tris.mean(axis=1)
+    assert not np.any((centroids[:, 0] > 1) & (centroids[:, 1] > 1))        # nothing in the notch
+    pentagon = np.array([[np.cos(a), np.sin(a), 0] for a in np.linspace(0, 2 * np.pi, 5, endpoint=False)])
+    faces, corner, poly = triangulate([5], np.arange(5), pentagon)
+    expected, _ = fan(np.array([5]), np.array([0]))
+    assert np.array_equal(corner, expected) and np.array_equal(faces, expected)
+
+
+def test_animated_visibility_hides_a_mesh_at_the_frames_it_is_invisible(tmp_path):
+    """visibility time samples {0: inherited, 6: invisible}: the mesh is hit
+    at frame 0 and at no pixel at frame 12; a mesh hidden from the start
+    that shows up later is there when it shows up."""
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
+    stage = new_stage(tmp_path / "vis.usda", end=12)
+    pts, counts, idx = tube()
+    mesh(stage, "/Gone", pts, counts, idx)
+    late = mesh(stage, "/Late", np.asarray(pts) + [0, 0, 1.5], counts, idx)
+    vis = UsdGeom.Imageable(stage.GetPrimAtPath("/Gone")).CreateVisibilityAttr()
+    vis.Set(UsdGeom.Tokens.inherited, 0)
+    vis.Set(UsdGeom.Tokens.invisible, 6)
+    late_vis = UsdGeom.Imageable(late.GetPrim()).CreateVisibilityAttr()
+    late_vis.Set(UsdGeom.Tokens.invisible, 0)
+    late_vis.Set(UsdGeom.Tokens.inherited, 6)
+    stage.GetRootLayer().Save()
+    scene = AnimatedScene(_scene(tmp_path, "vis.usda", end=12))
+    renderer = SceneRenderer(scene, config_of(scene), shading_of(scene))
+    n_gone = 10 * 5
+
+    def hits(frame):
+        _, result = renderer.render(scene.time_of(frame))
+        return np.isfinite(result.z).sum()
+    assert not scene.objects[0].static
+    v0, v12 = scene.vertices_at(scene.time_of(0)).copy(), scene.vertices_at(scene.time_of(12)).copy()
+    assert np.ptp(v12[:n_gone], axis=0).max() == 0 and np.ptp(v0[:n_gone], axis=0).max() > 0    # collapsed
+    assert np.ptp(v0[n_gone:], axis=0).max() == 0 and np.ptp(v12[n_gone:], axis=0).max() > 0
+    assert hits(0) > 0 and hits(12) > 0
+
+
+def test_authored_but_unsupported_usd_is_named(tmp_path):
+    """A missing texture file is exit 2 naming the shader and the file (it
+    rendered grey); holeIndices are a warning naming the mesh (they render
+    solid); topology authored only as time samples is named as such."""
+    from pxr import UsdShade
+    stage = new_stage(tmp_path / "tex.usda")
+    pts, counts, idx = tube(n_along=2)
+    m = mesh(stage, "/M", pts, counts, idx)
+    from usd_files import preview_material
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(preview_material(stage, "/Looks/Missing", (1, 1, 1),
+                                                                         texture="nowhere.png"))
+    stage.GetRootLayer().Save()
+    out = _check_line(_scene(tmp_path, "tex.usda"))
+    assert "texture file not found" in out and "nowhere.png" in out and "/Looks/Missing/Tex" in out
+    stage = new_stage(tmp_path / "holes.usda")
+    mesh(stage, "/Holey", pts, counts, idx).CreateHoleIndicesAttr([0, 1])
+    stage.GetRootLayer().Save()
+    res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, "holes.usda"))])
+    assert res.exit_code == 0 and "holeIndices" in res.output and "/Holey" in res.output
+    stage = new_stage(tmp_path / "sampled.usda")
+    sampled = UsdGeom.Mesh.Define(stage, "/Sampled")
+    sampled.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(pts, np.float32)))
+    sampled.CreateFaceVertexCountsAttr().Set(list(counts), 0)
+    sampled.CreateFaceVertexIndicesAttr().Set(list(idx), 0)
+    stage.GetRootLayer().Save()
+    out = _check_line(_scene(tmp_path, "sampled.usda"))
+    assert "time samples" in out and "/Sampled" in out
+
+
+def test_check_strict_rejects_a_usd_reference_that_leaves_the_scenes_folder(tmp_path):
+    """A stage that references a layer outside the scene's folder
+    (@../props/props.usda@) is a warning, and an error under --strict, as a
+    scene file's mesh outside its folder is."""
+    (tmp_path / "props").mkdir()
+    (tmp_path / "shot").mkdir()
+    props = new_stage(tmp_path / "props" / "props.usda")
+    pts, counts, idx = tube(n_along=2)
+    mesh(props, "/Prop", pts, counts, idx)
+    props.GetRootLayer().Save()
+    top = new_stage(tmp_path / "shot" / "shot.usda")
+    top.DefinePrim("/Prop").GetReferences().AddReference("../props/props.usda", "/Prop")
+    top.GetRootLayer().Save()
+    path = _scene(tmp_path / "shot", "shot.usda")
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 0 and "props.usda" in res.output and "outside" in res.output, res.output
+    res = CliRunner().invoke(main, ["check", "--strict", str(path)])
+    assert res.exit_code == 2 and "objects.0.mesh" in res.output and "props.usda" in res.output, res.output
+
+
+def test_frames_past_a_stages_range_are_warned_and_aovs_can_be_asked_for(tmp_path):
+    """A whole stage rendered past its time codes (frames 0..2) says its
+    meshes hold still there; `--aov` asks a stage (which has no output.aovs)
+    for extra channels."""
+    shot(tmp_path / "shot.usda")
+    out = tmp_path / "frames"
+    res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(out), "--res", "32x24",
+                                    "--frames", "2:4", "--aov", "N,id", "-q"])
+    assert res.exit_code == 0, res.output
+    assert "time codes only cover 0..0.0833333" in res.stderr and "frames 2..4" in res.stderr, res.stderr
+    from raycore.images.image_io import read_exr
+    names, _, _ = read_exr(str(out / "frame_0004.exr"))
+    assert {"N.X", "N.Y", "N.Z", "id"} <= set(names)
+    res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(out), "--aov", "Q", "-q"])
+    assert res.exit_code == 2 and "--aov" in res.output
+    res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(tmp_path / "in"),
+                                    "--res", "32x24", "--frames", "0:2", "-q"])
+    assert res.exit_code == 0 and "time codes" not in res.stderr

@@ -30,6 +30,7 @@ def test_compare_names_the_builtin_scene_and_keeps_a_scene_files_size(tmp_path):
     assert res.exit_code == 0, res.output
     result = json.loads(out.read_text())
     assert result["scene"] == "demo" and "frustrace-compare" not in res.output
+    assert result["shadow_accel"] == "bvh"                     # the default, for both rows
     assert result["rows"][0]["resolution"] == [48, 48]
     path = scene_with(tmp_path, BALL)                     # output.resolution [40, 32]
     res = run("compare", "grid", "vs", "kdtree", path, "--frames", "1", "--json", out)
@@ -134,12 +135,30 @@ def test_compare_takes_a_usd_stage_and_one_shadow_structure_for_every_row(tmp_pa
     stage = tmp_path / "shot.usda"
     shot(stage)
     out = tmp_path / "c.json"
-    res = run("compare", "grid", "vs", "bvh", stage, "--frames", "1", "--res", "40", "--json", out)
+    res = run("compare", "grid", "vs", "bvh", stage, "--frames", "1", "--res", "32", "--shadow-accel", "grid",
+              "--json", out)
     assert res.exit_code == 0, res.output
     result = json.loads(out.read_text())
-    assert result["shadow_accel"] == "bvh" and "shadow rays of every row through the bvh" in res.output
+    assert result["shadow_accel"] == "grid" and "shadow rays of every row through the grid" in res.output
     assert [r["structure"] for r in result["rows"]] == ["grid", "bvh"]
-    res = run("compare", "grid", "vs", "kdtree", stage, "--frames", "1", "--res", "40", "--shadow-accel", "grid",
-              "--json", out)
-    assert res.exit_code == 0 and json.loads(out.read_text())["shadow_accel"] == "grid", res.output
     assert "bvh" in run("compare", "--help").output
+
+
+def test_a_narrow_bench_table_keeps_what_tells_its_rows_apart():
+    """At 80 columns bench left out packet, so the three packet sizes of one
+    scene read as three identical rows; the columns that say what a row is
+    stay while they tell rows apart, and the BVH's figures print once a scene."""
+    from rich.console import Console
+
+    from cli.report import bench_table
+    base = _bench_rows()[0]
+    bvh = {"bvh_build_ms": 3.6, "bvh_build_ms_per_100k": 22.0, "bvh_refit_ms": 0.1, "moving_triangles": 16880,
+           "bvh_refit_ms_per_100k": 0.7, "bvh_rebuilds": 0, "bvh_max_sah_growth": 1.01}
+    rows = [{**base, **bvh, "packet": p, "fps_raycast": 100.0 + p} for p in (8, 16, 32)]
+    console = Console(width=80, record=True)
+    bench_table(rows, console=console)
+    text = console.export_text()
+    body = [line for line in text.splitlines() if line.startswith("│")]
+    assert len(body) == 3 and len(set(body)) == 3, text
+    assert all(p in " ".join(body) for p in ("8", "16", "32 *"))
+    assert text.count("BVH build") == 1
