@@ -113,7 +113,7 @@ class SceneObject:
         key = f"objects.{index}"
         owner = f"object {spec.name!r}"
         self.name = spec.name
-        self.curve = self.skeleton = self.gltf = self.usd = None
+        self.curve = self.skeleton = self.gltf = self.usd = self.fbx = None
         self.translation = self.rotation = self.scale = None
         if spec.keyframes is not None:
             times = check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes", owner)
@@ -144,6 +144,14 @@ class SceneObject:
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
                                    warnings)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
+        elif spec.mesh.lower().endswith(".fbx"):
+            from anim.io.fbx import FbxObject            # a ufbx process only for scenes with FBX files
+            if spec.animation == "all" or isinstance(spec.animation, list):
+                raise SceneError(scene_path, f"{key}.animation", "an FBX file plays one take at a time: "
+                                                                 "name it or give its index")
+            self.fbx = FbxObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
+                                 warnings)
+            self.base, self.faces, self.uvs = self.fbx.rest.astype(np.float32), self.fbx.faces, self.fbx.uvs
         elif is_usd(spec.mesh):
             self.usd = UsdObject(base / spec.mesh, spec.prim, scene_path, f"{key}.mesh")
             self.base, self.faces, self.uvs = self.usd.rest.astype(np.float32), self.usd.faces, self.usd.uvs
@@ -163,7 +171,8 @@ class SceneObject:
                 self.rotation = rotation_curve(tr.rotation, scene_path, f"{key}.transform.rotation", owner,
                                                spec.extrapolate, warnings)
         self.has_transform = any(c is not None for c in (self.translation, self.rotation, self.scale))
-        self.file = self.gltf if self.gltf is not None else self.usd   # a file that brings its own motion and materials
+        # a file that brings its own motion and materials
+        self.file = next((f for f in (self.gltf, self.usd, self.fbx) if f is not None), None)
         self.rigid = self.curve is None and self.skeleton is None and (self.file is None or self.file.rigid)
         self.static = (self.curve is None
                        and (self.skeleton is None or self.skeleton.constant)

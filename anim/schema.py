@@ -9,7 +9,7 @@ Extensions beyond the spec's example (all optional, backward compatible):
 `camera.aperture_radius` and `camera.focus_distance`, lights of `type: directional`,
 more interpolation methods (anim/interpolate.py), rotation tracks with
 `slerp`/`spline`, `skeleton:` (joints + skinning weights) on a mesh object,
-glTF files (`.gltf`/`.glb`) as `mesh:` with `animation:`, USD stages as
+glTF files (`.gltf`/`.glb`) and FBX files as `mesh:` with `animation:`, USD stages as
 `mesh:` with `prim:`.
 """
 import json
@@ -256,10 +256,11 @@ class Object(Strict):
         if self.keyframes is not None and (self.transform is not None or self.skeleton is not None):
             raise ValueError("'transform' and 'skeleton' go with 'mesh', not with 'keyframes'")
         is_gltf = self.mesh is not None and self.mesh.lower().endswith((".gltf", ".glb"))
-        if self.animation is not None and not is_gltf:
-            raise ValueError("'animation' selects an animation of a .gltf/.glb mesh")
-        if is_gltf and self.skeleton is not None:
-            raise ValueError("a glTF file brings its own skins; 'skeleton' is for other meshes")
+        is_fbx = self.mesh is not None and self.mesh.lower().endswith(".fbx")
+        if self.animation is not None and not (is_gltf or is_fbx):
+            raise ValueError("'animation' selects an animation of a .gltf/.glb mesh or a take of an .fbx mesh")
+        if (is_gltf or is_fbx) and self.skeleton is not None:
+            raise ValueError("a glTF or FBX file brings its own skins; 'skeleton' is for other meshes")
         is_usd = self.mesh is not None and self.mesh.lower().endswith(USD_SUFFIXES)
         if self.prim is not None and not is_usd:
             raise ValueError("'prim' selects a prim of a USD stage (.usd, .usda, .usdc, .usdz)")

@@ -11,9 +11,11 @@ the files it writes are committed, so the tests never need bpy:
 The character: a tube of 640 vertices (32 around, 20 rings, along +z), a
 three-bone armature bending it (Bezier keys), an animated shape key
 bulging its middle, a Principled BSDF material. Exports: glTF binary (one
-animation per action, shape keys as sparse accessors: Blender's defaults)
-and USD (.usdc: UsdSkel skeleton, animation and blend shape; the defaults
-but for "Animation", which Blender's USD export leaves off).
+animation per action, shape keys as sparse accessors: Blender's defaults),
+USD (.usdc: UsdSkel skeleton, animation and blend shape; the defaults
+but for "Animation", which Blender's USD export leaves off) and FBX
+(Blender's defaults: Y up, unit scale applied, the rig's animation baked,
+the shape key as a blend shape).
 """
 import sys
 from pathlib import Path
@@ -133,11 +135,12 @@ def main(out_dir):
     bpy.ops.export_scene.gltf(filepath=str(out / "char.glb"))                 # default settings
     # default settings, but for "Animation", which is off by default (a still otherwise)
     bpy.ops.wm.usd_export(filepath=str(out / "char.usdc"), export_animation=True)
+    bpy.ops.export_scene.fbx(filepath=str(out / "char.fbx"))                  # default settings
     verts, tris = evaluated(scene, body)
     np.savez_compressed(out / "char_evaluated.npz", frames=np.array(FRAMES), fps=24.0, vertices=verts,
                         triangles=tris, colour=np.array(MATERIAL["colour"]),
                         roughness=MATERIAL["roughness"], metallic=MATERIAL["metallic"])
-    print(f"wrote {out}: char.glb, char.usdc, char_evaluated.npz ({len(verts[0])} vertices)")
+    print(f"wrote {out}: char.glb, char.usdc, char.fbx, char_evaluated.npz ({len(verts[0])} vertices)")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """A character made in Blender 5.0 (tests/blender, written by
 assets/make_blender_character.py: a 640-vertex tube, a three-bone
 armature, an animated shape key, Bezier keys) renders from Blender's own
-glTF export (with `animation: all`) and USD export with the depth of
-Blender's own evaluated mesh (issue 22: on >= 99.9 % of pixels)."""
+glTF export (with `animation: all`), USD export and FBX export (through
+ufbx) with the depth of Blender's own evaluated mesh on >= 99.9 % of
+pixels."""
 from pathlib import Path
 
 import numpy as np
@@ -50,15 +51,25 @@ def _reference(tmp_path, name, y_up):
     return _scene(tmp_path, name, "    keyframes:\n" + "".join(keys), y_up)
 
 
-def _depths(path, name):
+def _depths(path, name, shift=0):
+    """Z of the reference frames, each rendered as frame f + shift."""
     res = CliRunner().invoke(main, ["render", str(path), "--quiet", "--no-shadows",
-                                    "--frames", f"{REF['frames'][0]}:{REF['frames'][-1]}"])
+                                    "--frames", f"{REF['frames'][0] + shift}:{REF['frames'][-1] + shift}"])
     assert res.exit_code == 0, res.output
     out = {}
     for f in REF["frames"]:
-        names, pix, _ = read_exr(str(path.parent / name / f"f_{f:02d}.exr"))
+        names, pix, _ = read_exr(str(path.parent / name / f"f_{f + shift:02d}.exr"))
         out[int(f)] = pix[..., names.index("Z")]
     return out
+
+
+def _same_depth(got, want):
+    for f in got:
+        a, b = got[f], want[f]
+        both = np.isfinite(a) & np.isfinite(b)
+        same = (np.isinf(a) & np.isinf(b)) | (both & (np.abs(np.where(both, a, 0) - np.where(both, b, 0)) <= 1e-4 * np.abs(b)))
+        assert np.isfinite(b).sum() > 500                      # the character fills part of the frame
+        assert same.mean() >= 0.999, (f, same.mean())
 
 
 @pytest.mark.parametrize("mesh, extra, y_up", [("char.glb", "    animation: all\n", True),
@@ -68,12 +79,7 @@ def test_blender_export_has_the_depth_of_blenders_evaluated_mesh(tmp_path, mesh,
         (tmp_path / f.name).write_bytes(f.read_bytes())
     got = _depths(_scene(tmp_path, "export", f"    mesh: {mesh}\n{extra}", y_up), "export")
     want = _depths(_reference(tmp_path, "blender", y_up), "blender")
-    for f in got:
-        a, b = got[f], want[f]
-        both = np.isfinite(a) & np.isfinite(b)
-        same = (np.isinf(a) & np.isinf(b)) | (both & (np.abs(np.where(both, a, 0) - np.where(both, b, 0)) <= 1e-4 * np.abs(b)))
-        assert np.isfinite(b).sum() > 500                      # the character fills part of the frame
-        assert same.mean() >= 0.999, (f, same.mean())
+    _same_depth(got, want)
     # the shape key's bulge is in the glTF export only with animation: all
     if mesh == "char.glb":
         first = _depths(_scene(tmp_path, "first", f"    mesh: {mesh}\n", y_up), "first")
@@ -94,3 +100,23 @@ def test_the_principled_material_comes_through_both_exports(tmp_path, mesh):
     np.testing.assert_allclose(rows[0, :3], REF["colour"], rtol=1e-6)
     np.testing.assert_allclose(rows[0, 3], 0.04 + 0.96 * float(REF["metallic"]), rtol=1e-6)
     np.testing.assert_allclose(rows[0, 4], 2 / float(REF["roughness"]) ** 4 - 2, rtol=1e-5)
+
+
+def test_blenders_fbx_export_has_the_depth_of_blenders_evaluated_mesh(tmp_path):
+    """Blender's default FBX export (Y up, unit scale applied, the rig's
+    animation baked, the shape key a blend shape), read by ufbx: skinned and
+    blend-shaped, it has Blender's depth on every tested frame. Its take
+    starts at time 0 with Blender's frame 1, so Blender's frame f is
+    frustrace's frame f - 1 at 24 fps; the material comes through."""
+    from anim.scene import AnimatedScene
+    for f in HERE.iterdir():
+        (tmp_path / f.name).write_bytes(f.read_bytes())
+    scene_path = _scene(tmp_path, "fbx", "    mesh: char.fbx\n", True)
+    scene_path.write_text(scene_path.read_text().replace("frames: {start: 1, end: 24, fps: 24}",
+                                                         "frames: {start: 0, end: 23, fps: 24}"))
+    got = _depths(scene_path, "fbx", shift=-1)
+    want = _depths(_reference(tmp_path, "blender", True), "blender")
+    _same_depth(got, want)
+    scene = AnimatedScene(scene_path)
+    rows = scene.material_table[scene.tri_material]
+    np.testing.assert_allclose(rows[0, :3], REF["colour"], rtol=1e-6)

@@ -1,0 +1,162 @@
+"""FBX objects (`mesh: char.fbx`): meshes, skinning, blend shapes and node
+animation as ufbx evaluates them, with the file's takes chosen by
+`animation:` (a name or an index, the first by default).
+
+ufbx (the official binding of the ufbx C library) runs in a process of its
+own (fbx_worker.py): the binding can crash the interpreter, and a crash
+there is one line and exit 2 here. The file is read Y up in metres
+(`target_axes` right-handed Y up, `target_unit_meters` 1), as glTF is; a
+take's time t is scene time t (frame f at f / fps). Skinned, blend-shaped
+positions are ufbx's (`evaluate_scene(..., evaluate_skinning=True)`), in
+world space through each instance's geometry-to-world transform.
+"""
+import atexit
+import os
+import pickle
+import struct
+import subprocess
+import sys
+
+import numpy as np
+
+from anim.errors import SceneError
+from anim.interpolate import wrap_time
+from anim.io.polygons import triangulate
+from anim.materials import pbr_material
+
+_WORKERS = []
+
+
+def _stop_workers():
+    for w in _WORKERS:
+        w.close()
+
+
+atexit.register(_stop_workers)
+
+
+class FbxWorker:
+    """The worker process of one FBX file."""
+
+    def __init__(self, path, scene_path, key):
+        self.path, self.scene_path, self.key = path, scene_path, key
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [_package_root(),
+                                                                         os.environ.get("PYTHONPATH")]))}
+        self.proc = subprocess.Popen([sys.executable, "-m", "anim.io.fbx_worker"], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
+        _WORKERS.append(self)
+
+    def call(self, op, *args):
+        """The worker's answer to (op, args); SceneError (exit 2) if it fails or dies."""
+        try:
+            data = pickle.dumps((op, args))
+            self.proc.stdin.write(struct.pack("<Q", len(data)) + data)
+            self.proc.stdin.flush()
+            head = self.proc.stdout.read(8)
+            if len(head) < 8:
+                raise EOFError
+            (n,) = struct.unpack("<Q", head)
+            status, value = pickle.loads(self.proc.stdout.read(n))
+        except (BrokenPipeError, EOFError, OSError, pickle.UnpicklingError):
+            code = self.proc.poll()
+            raise SceneError(self.scene_path, self.key, f"{self.path.name}: the FBX reader (ufbx) stopped "
+                                                        f"reading it (exit {code}): a malformed file") from None
+        if status != "ok":
+            raise SceneError(self.scene_path, self.key, f"{self.path.name}: cannot read FBX: {value}")
+        return value
+
+    def close(self):
+        if self.proc.poll() is None:
+            try:
+                self.proc.stdin.close()
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+
+
+def _package_root():
+    """The folder that holds the `anim` package, for the worker's imports."""
+    import anim
+    return os.path.dirname(os.path.dirname(os.path.abspath(anim.__file__)))
+
+
+class FbxObject:
+    """Geometry and motion of one FBX file; `place(t, out, transform)` writes
+    the posed vertices (n, 3) f32."""
+
+    def __init__(self, path, animation, extrapolate, scene_path, key, warnings=None):
+        self.path, self.scene_path, self.key, self.extrapolate = path, scene_path, key, extrapolate
+        warnings = warnings if warnings is not None else []
+        if not path.is_file():
+            raise SceneError(scene_path, key, f"mesh file not found: {path}")
+        self.worker = FbxWorker(path, scene_path, key)
+        info = self.worker.call("open", str(path))
+        parts = info["parts"]
+        if not parts:
+            raise SceneError(scene_path, key, f"{path.name}: the file has no mesh")
+        self.take = self._take(info["takes"], animation, warnings)
+        faces, rests, slots, offset = [], [], [], 0
+        for part in parts:
+            rest = np.asarray(part["rest"], np.float64)
+            counts = part["faces"][:, 1]
+            order = np.concatenate([np.arange(b, b + n) for b, n in part["faces"]]) if len(counts) else \
+                np.zeros(0, np.int64)
+            tri, _, poly = triangulate(counts, part["index"][order], rest)
+            faces.append(tri + offset)
+            slots.append(part["face_material"][poly] if len(part["face_material"]) else np.full(len(tri), -1))
+            rests.append(rest)
+            offset += len(rest)
+        self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
+        self.face_material = np.concatenate(slots).astype(np.int64)
+        self.rest = np.concatenate(rests)
+        if not np.all(np.isfinite(self.rest)):
+            raise SceneError(scene_path, key, f"{path.name}: inf or NaN among the mesh's points")
+        self.uvs = np.zeros((len(self.rest), 2), np.float32)
+        self.materials = {}
+        for m in info["materials"]:
+            if m["textured"]:
+                warnings.append(f"{key}: {path.name}: material {m['name']!r} has a texture, which frustrace "
+                                "does not read from FBX files yet: its colour is used")
+            self.materials[m["slot"]] = pbr_material(f"{path.name}:{m['name']}", m["colour"], m["roughness"],
+                                                     m["metallic"])
+        take = info["takes"][self.take] if self.take is not None else None
+        self.t0, self.t1 = (take["begin"], take["end"]) if take else (0.0, 0.0)
+        self.static = self.take is None or self.t1 <= self.t0
+        self.rigid = False                      # skinned and blend-shaped meshes deform
+        self.last = None
+
+    def _take(self, takes, which, warnings):
+        """The index of the take `animation:` names (the first when unset); None without takes."""
+        anim_key = self.key.rsplit(".", 1)[0] + ".animation"
+        if not takes:
+            if which is not None:
+                raise SceneError(self.scene_path, anim_key, f"{self.path.name}: animation {which!r} requested, "
+                                                            "but the file has no takes")
+            return None
+        names = [t["name"] for t in takes]
+        if which is None:
+            if len(takes) > 1:
+                warnings.append(f"{self.key}: {self.path.name} has {len(takes)} takes ({', '.join(names)}); "
+                                f"the first plays ('animation:' chooses, key {anim_key})")
+            return 0
+        if isinstance(which, int) and not isinstance(which, bool):
+            if 0 <= which < len(takes):
+                return which
+        elif which in names:
+            return names.index(which)
+        raise SceneError(self.scene_path, anim_key, f"{self.path.name}: no take {which!r}; its takes: "
+                                                    f"{', '.join(f'{i} ({n!r})' for i, n in enumerate(names))}")
+
+    def place(self, t, out, transform=None):
+        """Posed vertices at scene time t into out (n, 3) f32; `transform` (3, 4) on top."""
+        if self.static:
+            pts = self.rest
+        else:
+            pts = np.asarray(self.worker.call("evaluate", self.take, wrap_time(t, self.t0, self.t1,
+                                                                             self.extrapolate)))
+            if pts.shape != self.rest.shape or not np.all(np.isfinite(pts)):
+                raise SceneError(self.scene_path, self.key, f"{self.path.name}: the evaluated mesh at t = {t:g} "
+                                                            "has inf or NaN points, or another vertex count")
+        if transform is not None:
+            pts = pts @ np.asarray(transform)[:, :3].T + np.asarray(transform)[:, 3]
+        out[...] = pts

@@ -1,0 +1,155 @@
+"""The FBX reader's own process: ufbx (the official Python binding of the
+ufbx C library) loads and evaluates the file here, and fbx.py asks for what
+it needs over a pipe.
+
+The binding is young: a wrapper of a scene element that is freed and asked
+for again reads freed memory (an element's `name` read twice through two
+short-lived wrappers ends the interpreter with a segmentation fault), and
+the cyclic garbage collector has crashed it too. So this process holds
+every wrapper it makes for as long as it lives (`_held`), never collects
+cycles, and leaves by os._exit; and because a crash here is still
+possible on a malformed file, it is a process of its own: its death is one
+line and exit 2 for the user, never a core dump of the render.
+
+Protocol: length-prefixed pickles on stdin/stdout. Requests are (op, args);
+replies ("ok", value) or ("error", message).
+"""
+import gc
+import os
+import pickle
+import struct
+import sys
+
+import numpy as np
+
+_held = []          # every ufbx object made here, kept alive for the process's life
+
+
+def hold(x):
+    _held.append(x)
+    return x
+
+
+def items(lst):
+    """The elements of a ufbx list, each wrapper made once and held."""
+    hold(lst)
+    return [hold(lst[i]) for i in range(len(lst))]
+
+
+def vec3s(lst):
+    return np.array([[v.x, v.y, v.z] for v in items(lst)], np.float64).reshape(-1, 3)
+
+
+def matrix(m):
+    """A ufbx Matrix (columns c0..c3) as a (3, 4) float64 affine map."""
+    cols = [hold(getattr(m, c)) for c in ("c0", "c1", "c2", "c3")]
+    return np.array([[c.x, c.y, c.z] for c in cols], np.float64).T
+
+
+class Reader:
+    """One loaded FBX scene: its meshes (an instance each), takes and materials."""
+
+    def __init__(self, path):
+        import ufbx
+        self.ufbx = ufbx
+        self.scene = hold(ufbx.load_file(path, target_axes=ufbx.axes_right_handed_y_up, target_unit_meters=1.0))
+        self.takes = items(self.scene.anim_stacks)
+        self.parts = []            # (mesh index, instance index) in the order vertices are laid out
+        for mi, mesh in enumerate(items(self.scene.meshes)):
+            for ni, _ in enumerate(items(mesh.instances)):
+                self.parts.append((mi, ni))
+
+    def info(self):
+        meshes = items(self.scene.meshes)
+        parts, materials, slot_of = [], [], {}
+        for mi, ni in self.parts:
+            mesh = meshes[mi]
+            node = items(mesh.instances)[ni]
+            index = np.fromiter(items(mesh.vertex_indices), np.int64)
+            faces = [(f.index_begin, f.num_indices) for f in items(mesh.faces)]
+            rest = vec3s(hold(mesh.vertex_position).values) if hold(mesh.vertex_position).unique_per_vertex \
+                else None
+            if rest is None or len(rest) != mesh.num_vertices:
+                rest = vec3s(mesh.vertices)
+            world = matrix(hold(node.geometry_to_world))
+            local = [slot_of.setdefault(int(m.typed_id), len(slot_of)) for m in items(mesh.materials)]
+            face_material = np.fromiter(items(mesh.face_material), np.int64) if len(hold(mesh.face_material)) \
+                else np.full(len(faces), -1, np.int64)
+            parts.append({"name": str(node.name), "index": index, "faces": np.array(faces, np.int64).reshape(-1, 2),
+                          "rest": rest @ world[:, :3].T + world[:, 3],
+                          "face_material": np.array([local[k] if 0 <= k < len(local) else -1
+                                                     for k in face_material], np.int64)})
+        for m in items(self.scene.materials):
+            if int(m.typed_id) not in slot_of:
+                continue
+            pbr = hold(m.pbr)
+            colour = hold(hold(pbr.base_color).value_vec4)
+            rough = hold(hold(pbr.roughness).value_vec4)
+            metal = hold(hold(pbr.metalness).value_vec4)
+            materials.append({"slot": slot_of[int(m.typed_id)], "name": str(m.name),
+                              "colour": (colour.x, colour.y, colour.z), "roughness": rough.x,
+                              "metallic": metal.x, "textured": hold(pbr.base_color).texture is not None})
+        takes = [{"name": str(t.name), "begin": float(t.time_begin), "end": float(t.time_end)} for t in self.takes]
+        return {"parts": parts, "materials": materials, "takes": takes,
+                "fps": float(hold(self.scene.settings).frames_per_second)}
+
+    def evaluate(self, take, t):
+        """World positions of every part at time t of take `take`, stacked."""
+        ufbx = self.ufbx
+        anim = hold(self.takes[take].anim)
+        scene = hold(ufbx.evaluate_scene(self.scene, anim, float(t), evaluate_skinning=True))
+        meshes = items(scene.meshes)
+        out = []
+        for mi, ni in self.parts:
+            mesh = meshes[mi]
+            node = items(mesh.instances)[ni]
+            skinned = hold(mesh.skinned_position)
+            pts = vec3s(skinned.values)
+            if not skinned.unique_per_vertex or len(pts) != mesh.num_vertices:
+                pts = vec3s(mesh.vertices)
+            if mesh.skinned_is_local:
+                world = matrix(hold(node.geometry_to_world))
+                pts = pts @ world[:, :3].T + world[:, 3]
+            out.append(pts)
+        return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _read(stream):
+    head = stream.read(8)
+    if len(head) < 8:
+        return None
+    (n,) = struct.unpack("<Q", head)
+    return pickle.loads(stream.read(n))
+
+
+def _write(stream, value):
+    data = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(struct.pack("<Q", len(data)) + data)
+    stream.flush()
+
+
+def main():
+    gc.disable()
+    inp, out = sys.stdin.buffer, sys.stdout.buffer
+    reader = None
+    while True:
+        request = _read(inp)
+        if request is None:
+            break
+        op, args = request
+        try:
+            if op == "open":
+                reader = Reader(*args)
+                value = reader.info()
+            elif op == "evaluate":
+                value = reader.evaluate(*args)
+            else:
+                raise ValueError(f"unknown request {op!r}")
+            _write(out, ("ok", value))
+        except Exception as exc:          # ufbx's own errors (a malformed file): one line for the user
+            _write(out, ("error", f"{type(exc).__name__}: {exc}"))
+    os._exit(0)                           # no interpreter teardown over the held wrappers
+
+
+if __name__ == "__main__":
+    main()
