@@ -147,8 +147,10 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
     cfg = RenderConfig(**cfg_fields)
     shading = shading_of(scene)
     # one cold compile per machine, not one per worker (warm_lock.py)
-    compile_s, _ = warm_once(repr(key), lambda: warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0])))
-    _WORKER_SCENES[key] = WorkerScene(scene, SceneRenderer(scene, cfg, shading), compile_s, directory)
+    renderer = SceneRenderer(scene, cfg, shading)
+    compile_s, _ = warm_once(repr(key), lambda: warm_up(scene, shading, cfg, scene.time_of(scene.frame_numbers[0]),
+                                                        structures=renderer.structures))
+    _WORKER_SCENES[key] = WorkerScene(scene, renderer, compile_s, directory)
     return _WORKER_SCENES[key]
 
 

@@ -122,7 +122,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
     # in every frame's header: a frame of a run killed before its stats were
     # written brings its run back into stats.json (stats.recovered_runs)
     run_info = {"started": started, "host": socket.gethostname(), "pid": os.getpid(), **settings_of(cfg)}
-    ended, extra = "complete", {"compile_s": 0.0}
+    ended, extra = "complete", {"compile_s": 0.0, "warm_up_s": 0.0}
     try:
         if client is None:
             _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, shading, on_compile)
@@ -136,7 +136,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
             release(path)
         # the wall clock of the frames: the warm-up (compile) is reported apart;
         # on a cluster the workers' own warm-ups fall inside it
-        wall_s = time.perf_counter() - wall0 - extra["compile_s"]
+        wall_s = time.perf_counter() - wall0 - extra["warm_up_s"]
         run = {"started": started, "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
@@ -152,18 +152,22 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
 
 def _render_here(job, todo, take, done, on_frame, should_stop, extra, run_info, shading, on_compile=None) -> None:
     """Frames in this process, written by a writer thread; the compile
-    (warm-up) seconds go into extra["compile_s"] as soon as they are known."""
+    warm-up's seconds go into extra["warm_up_s"] as soon as they are known,
+    the seconds numba spent compiling in it into extra["compile_s"]."""
     scene, cfg = job.scene, job.cfg
     if todo.first() is None:
         return
+    renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
     with watching(on_compile) as watch:
-        extra["compile_s"], helper_compiled = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]))
+        # the warm-up builds the frames' own structures (renderer.structures)
+        extra["warm_up_s"], helper_compiled = warm_up(scene, shading, cfg, scene.time_of(todo.first()[0]),
+                                                      structures=renderer.structures)
     extra["compiled"] = watch.seconds()          # {kernel: s}: empty when the cache had them all
+    extra["compile_s"] = float(sum(extra["compiled"].values()))
     if helper_compiled:                          # a cold cache's other half (compile_helper.py)
         extra["compiled_by_helper"] = helper_compiled
     if on_compile is not None and watch.done:
         on_compile(None)
-    renderer = SceneRenderer(scene, cfg, shading, MAX_PENDING_WRITES)
 
     def write(path, result, row):
         t0 = time.perf_counter()

@@ -17,16 +17,20 @@ class SceneRenderer:
     """Frames of one scene, rendered with reused work buffers: interpolate
     (timed as interp_ms), then build, trace, shadow and shade."""
 
-    def __init__(self, scene: AnimatedScene, cfg: RenderConfig, shading: Shading, pending_writes: int = 0):
+    def __init__(self, scene: AnimatedScene, cfg: RenderConfig, shading: Shading, pending_writes: int = 0,
+                 structures: FrameStructures = None):
+        """structures: another renderer's of this scene (their state does
+        not depend on the image size: the warm-up's, built for the frames)."""
         self.scene, self.cfg, self.shading = scene, cfg, shading
-        self.vf = vertex_face_csr(scene.faces, scene.n_vertices)
+        self.vf = vertex_face_csr(scene.faces, scene.n_vertices) if structures is None else \
+            (structures.vf_start, structures.vf_faces)
         # image ring: the frame being written, the one being rendered, and every
         # write in flight (pending_writes: how many frames may still be writing)
         self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet,
                                     n_images=pending_writes + 2)
         # static objects: gathered, binned and given normals once (raycore/grid/incremental.py)
-        self.structures = FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
-                                    scene.moving_triangles, scene.moving_object_ranges)
+        self.structures = structures or FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
+                                                        scene.moving_triangles, scene.moving_object_ranges)
 
     def render(self, t):
         """(interp_ms, FrameResult) of the frame at time t."""

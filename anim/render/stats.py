@@ -193,6 +193,7 @@ def merged_stats(previous, scene, cfg, rows, run) -> dict:
         frames[r["frame"]] = {**r, "run": len(runs)}
     merged = [frames[k] for k in sorted(frames)]
     summary = summarize(merged, run["wall_s"], run["compile_s"])
+    summary["warm_up_s"] = run.get("warm_up_s", run["compile_s"])
     summary["fps_wall"] = len(rows) / run["wall_s"] if rows and run["wall_s"] > 0 else 0.0
     return {"scene": scene.path.name, "scene_file": str(Path(scene.path).resolve()), "resolution": [cfg.width, cfg.height], **settings_of(cfg),
             "frames": merged, "runs": runs + [run], "summary": summary}

@@ -8,14 +8,17 @@ from anim.render.renderer import SceneRenderer
 from raycore.images.half_float import to_half
 
 
-def warm_up(scene, shading, cfg, t):
+def warm_up(scene, shading, cfg, t, structures=None):
     """Compile (or load from numba's cache) every kernel the frame loop will
     use, on a tiny image with the run's settings: two frames (the second
     takes the per-frame paths the first does not: the BVH's refit, a moved
     grid) and an EXR write (the half-float conversion). Returns (seconds,
     {kernel: s} compiled by a helper process); the seconds are reported as
-    compile time. Warming only one 1-spp frame left the write, the refit and
-    the error budget to compile inside frames 0 and 1.
+    the warm-up's, apart from the frames. Warming only one 1-spp frame left
+    the write, the refit and the error budget to compile inside frames 0
+    and 1. structures: the frames' own (FrameStructures), built here once
+    instead of again for the frames (the BVH's trees of a large scene take
+    seconds).
 
     On a cold cache a helper process compiles the surface half meanwhile
     (compile_helper.py): this process first compiles the camera half (with
@@ -26,7 +29,7 @@ def warm_up(scene, shading, cfg, t):
     dt = 1.0 / scene.spec.frames.fps
     small = cfg.__class__(**{**cfg.__dict__, "width": 2 * cfg.packet, "height": 2 * cfg.packet})
     helper = compile_helper.start(scene, small, t)
-    renderer = SceneRenderer(scene, small, shading)
+    renderer = SceneRenderer(scene, small, shading, structures=structures)
     helper_compiled = {}
     if helper is not None:
         done = False
