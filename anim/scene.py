@@ -511,22 +511,28 @@ class AnimatedScene:
 
     @property
     def light_table(self):
-        """(n, 8) f32 rows for raycore/shading/shade.py: kind (0 point, 1 directional),
-        position or direction, colour x intensity; an area light gives one
-        point row per emitter, each with 1/samples of its intensity."""
+        """(n, 11) f32 rows for raycore/shading/shade.py: kind (0 point, 1 directional),
+        position or direction, colour x intensity, area-light group, and the
+        emitting side's unit normal of a one-sided emitter (else 0); an area
+        light gives one point row per emitter, each with 1/samples of its
+        intensity."""
         rows = []
         for index, light in enumerate(self.spec.lights):
             color = np.asarray(light.color) * light.intensity
             if light.type == "area":
+                side = (0.0, 0.0, 0.0)
+                if light.sides == 1:
+                    n = np.cross(np.asarray(light.edge_u, np.float64), np.asarray(light.edge_v, np.float64))
+                    side = tuple(n / np.linalg.norm(n)) if np.linalg.norm(n) > 0 else side
                 for p in emitter_positions(light):      # column 7: the area light's group (frame.py)
-                    rows.append([0.0, *p, *(color / light.samples), float(index + 1)])
+                    rows.append([0.0, *p, *(color / light.samples), float(index + 1), *side])
                 continue
             vec = light.position if light.type == "point" else light.direction
             if light.type == "directional":
                 n = np.linalg.norm(vec)
                 vec = tuple(np.asarray(vec) / n) if n > 0 else vec
-            rows.append([0.0 if light.type == "point" else 1.0, *vec, *color, 0.0])
-        return np.asarray(rows, np.float32).reshape(-1, 8)
+            rows.append([0.0 if light.type == "point" else 1.0, *vec, *color, 0.0, 0.0, 0.0, 0.0])
+        return np.asarray(rows, np.float32).reshape(-1, 11)
 
     @property
     def material_table(self):

@@ -145,9 +145,11 @@ class Render(Strict):
 class Light(Strict):
     """point: at `position`; directional: travelling along `direction`;
     area: a rectangle (`corner`, `edge_u`, `edge_v`) or a sphere (`center`,
-    `radius`) of `samples` isotropic point emitters sharing `intensity`
+    `radius`) of `samples` point emitters sharing `intensity`
     (anim/area_lights.py): soft shadows, and a point light in the limit of
-    zero size."""
+    zero size. A rectangle's emitters radiate to both sides, the same every
+    way (`sides: 2`), or, with `sides: 1`, only to the side edge_u x edge_v
+    points to, with a Lambertian (cosine) falloff, as a USD RectLight does."""
     type: Literal["point", "directional", "area"] = "point"
     position: Optional[Vec3] = None
     direction: Optional[Vec3] = None
@@ -157,6 +159,7 @@ class Light(Strict):
     center: Optional[Vec3] = None
     radius: Optional[Annotated[float, Field(ge=0, le=1e37)]] = None
     samples: Annotated[int, Field(ge=1, le=4096)] = 16
+    sides: Literal[1, 2] = 2
     color: Colour = (1.0, 1.0, 1.0)
     intensity: Annotated[float, Field(ge=0)] = 1.0
 
@@ -174,6 +177,8 @@ class Light(Strict):
             raise ValueError("direction [0, 0, 0] points nowhere")
         if "samples" in self.model_fields_set and self.type != "area":
             raise ValueError("samples is for area lights")
+        if self.sides == 1 and self.corner is None:
+            raise ValueError("sides: 1 is for rectangle area lights (corner, edge_u, edge_v)")
         return self
 
 

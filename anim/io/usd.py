@@ -515,8 +515,9 @@ def _lights(stage, time, pxr, notes):
             h = float(light.GetHeightAttr().Get(time) or 1.0)
             eu, ev = m[0, :3] * w, m[1, :3] * h
             area = 1.0 if normalize else float(np.linalg.norm(np.cross(eu, ev)))
-            lights.append({"type": "area", "corner": _vec(origin - 0.5 * eu - 0.5 * ev), "edge_u": _vec(eu),
-                           "edge_v": _vec(ev), "color": colour, "intensity": power * area})
+            # it emits along its -Z only: edges ordered so that edge_u x edge_v = -Z (sides: 1)
+            lights.append({"type": "area", "corner": _vec(origin - 0.5 * eu - 0.5 * ev), "edge_u": _vec(ev),
+                           "edge_v": _vec(eu), "sides": 1, "color": colour, "intensity": power * area})
     return lights
 
 

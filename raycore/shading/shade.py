@@ -48,6 +48,12 @@ def shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis,
         point_light = lights[li, 0] == F0
         lx, ly, lz = lights[li, 1], lights[li, 2], lights[li, 3]
         cr, cg, cb = lights[li, 4], lights[li, 5], lights[li, 6]
+        # a one-sided emitter (columns 8-10: its emitting side's normal e):
+        # a cosine lobe, -e . t, zero behind it; rows of 8 columns emit both ways
+        ex = lights[li, 8] if lights.shape[1] > 10 else F0
+        ey = lights[li, 9] if lights.shape[1] > 10 else F0
+        ez = lights[li, 10] if lights.shape[1] > 10 else F0
+        one_sided = (ex != F0) | (ey != F0) | (ez != F0)
         # without visibility, a row the loop only reads stands in (unread):
         # spec_w, which it writes, made LLVM's overlap check fail at run
         # time and the loop run scalar (hand's sweep without shadows, one
@@ -71,6 +77,8 @@ def shade_rows(point, normal, view, albedo, ks, shininess, lights, vis, use_vis,
             ndl = nx * tx + ny * ty + nz * tz
             w = atten * (vis_c[k] if use_vis else F1)
             w = w if ndl > F0 else F0
+            if one_sided:
+                w = w * max(-(ex * tx + ey * ty + ez * tz), F0)
             r_out[k] += cr * w * ar[k] * ndl
             g_out[k] += cg * w * ag[k] * ndl
             b_out[k] += cb * w * ab[k] * ndl

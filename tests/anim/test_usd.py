@@ -475,3 +475,42 @@ def test_frames_past_a_stages_range_are_warned_and_aovs_can_be_asked_for(tmp_pat
     res = CliRunner().invoke(main, ["render", str(tmp_path / "shot.usda"), "-o", str(tmp_path / "in"),
                                     "--res", "32x24", "--frames", "0:2", "-q"])
     assert res.exit_code == 0 and "time codes" not in res.stderr
+
+
+def test_a_rect_light_lights_only_the_side_it_faces(tmp_path):
+    """USD's RectLight emits along its -Z only: turned to face away from the
+    scene it lights nothing (it lit both sides), and facing it, a point
+    straight below gets its full intensity, one off to the side less (the
+    cosine of a Lambertian emitter)."""
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
+    from pxr import UsdLux
+    results = {}
+    for facing in ("down", "up"):
+        stage = new_stage(tmp_path / f"rect_{facing}.usda", up="Y", end=0)
+        mesh(stage, "/Floor", [[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], [4], [0, 3, 2, 1])
+        light = UsdLux.RectLight.Define(stage, "/Light")
+        light.CreateIntensityAttr(20.0)
+        light.CreateWidthAttr(0.2)
+        light.CreateHeightAttr(0.2)
+        xf = UsdGeom.Xformable(light.GetPrim())
+        xf.AddTranslateOp().Set(Gf.Vec3d(0, 2, 0))
+        xf.AddRotateXOp().Set(-90.0 if facing == "down" else 90.0)       # -Z turned to -Y (down) or +Y
+        cam = UsdGeom.Camera.Define(stage, "/Cam")
+        UsdGeom.Xformable(cam.GetPrim()).AddTranslateOp().Set(Gf.Vec3d(0, 8, 0))
+        UsdGeom.Xformable(cam.GetPrim()).AddRotateXOp().Set(-90.0)
+        stage.GetRootLayer().Save()
+        scene = AnimatedScene(tmp_path / f"rect_{facing}.usda")
+        assert scene.spec.lights[0].sides == 1
+        cfg = config_of(scene, width=33, height=33, ambient=0.0)
+        _, result = SceneRenderer(scene, cfg, shading_of(scene)).render(0.0)
+        results[facing] = result.rgba[..., :3].astype(np.float64).sum(axis=-1)
+    down, up = results["down"], results["up"]
+    assert up.max() == 0.0 and down[16, 16] > 0
+    # a small light 2 above the floor, seen by a pixel 6 columns aside at a
+    # distance r: the floor's cosine and the emitter's are both 2 / r, so the
+    # light falls as 16 / r^4 against the centre (a two-sided emitter: 8 / r^3)
+    h = np.tan(np.radians(scene.spec.camera.fov) / 2)
+    x = 8 * (2 * (22 + 0.5) / 33 - 1) * h
+    r = np.hypot(2.0, x)
+    assert down[16, 22] / down[16, 16] == pytest.approx(16 / r ** 4, rel=0.03), (down[16, 22] / down[16, 16], r)
