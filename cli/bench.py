@@ -35,3 +35,31 @@ def plot_phases(rows, path: Path):
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def plot_scale(result, path: Path):
+    """bench --scale: ms a frame per phase against triangles, log-log, with
+    Embree's build, trace and shadow rays dashed beside them."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = result["rows"]
+    n = [r["triangles"] for r in rows]
+    fig, ax = plt.subplots(figsize=(7.0, 5.0))
+    for key in ("build_ms", "trace_ms", "shade_ms", "shadow_ms", "frame_ms"):
+        g = result["growth"].get(key)
+        ax.loglog(n, [max(r[key], 1e-3) for r in rows], "o-",
+                  label=f"frustrace {key[:-3]}" + (f" (n^{g:.2f})" if g is not None else ""))
+    embree = [(r["triangles"], r["embree"]) for r in rows if r.get("embree")]
+    for key in ("build_ms", "trace_ms", "shadow_ms"):
+        if embree:
+            ax.loglog([t for t, _ in embree], [max(e[key], 1e-3) for _, e in embree], "x--",
+                      label=f"Embree {key[:-3]}")
+    ax.set_xlabel("triangles")
+    ax.set_ylabel("ms per frame (median)")
+    ax.set_title(f"frustrace bench --scale: {result['resolution']}x{result['resolution']}")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -324,6 +324,36 @@ def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrit
 PLOT_FORMATS = (".png", ".pdf", ".svg")
 
 
+def _bench_scale(sizes_text, res, n_frames, threads, accel, json_path, plot_path):
+    """bench --scale: the sizes one after another, a line each as it ends."""
+    import json
+    import tempfile
+
+    from anim.measure.scale import run_scale
+
+    from cli.report import scale_table
+    try:
+        sizes = [int(float(s)) for s in sizes_text.split(",") if s.strip()]
+    except ValueError:
+        raise click.BadParameter(f"comma-separated triangle counts, got {sizes_text!r}", param_hint="--scale-sizes")
+    if not sizes or min(sizes) < 100:
+        raise click.BadParameter("at least one size, each of 100 triangles or more", param_hint="--scale-sizes")
+    if accel is not None and accel not in ACCELS:
+        raise click.BadParameter(f"with --scale, one of {', '.join(ACCELS)}", param_hint="--accel")
+    with tempfile.TemporaryDirectory(prefix="frustrace-scale-") as tmp:
+        result = run_scale(sorted(sizes), res, n_frames, threads, Path(tmp), accel,
+                           on_size=lambda row: click.echo(f"bench --scale: {row['triangles']:,} triangles, "
+                                                          f"{row['frame_ms']:.1f} ms a frame", err=True))
+    result.update({"resolution": res, "frames": n_frames, "threads": threads})
+    scale_table(result)
+    if json_path:
+        json_path.write_text(json.dumps(result, indent=1))
+    if plot_path:
+        from cli.bench import plot_scale
+        plot_scale(result, plot_path)
+        click.echo(f"wrote {plot_path}")
+
+
 def _int_list(text, name, allowed=None):
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
@@ -369,8 +399,14 @@ def _int_list(text, name, allowed=None):
                    "are installed (embreex, Open3D, Mitsuba 3: pip install 'frustrace[peers]'), "
                    "rebuilt every frame, one shadow ray per hit and light; adds their rows and "
                    "frustrace's fps_full over the best peer's.")
+@click.option("--scale", "scale", is_flag=True,
+              help="Instead of the scenes: frame cost by phase and peak memory of a generated deforming mesh "
+                   "at --scale-sizes triangles, Embree beside it where embreex is installed, and each "
+                   "phase's growth exponent (minutes at a million triangles and more).")
+@click.option("--scale-sizes", default="100000,300000,1000000", show_default=True, metavar="N,N,..",
+              help="With --scale: the mesh sizes in triangles.")
 def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_path, error_report, quick, plot_path,
-          peers):
+          peers, scale, scale_sizes):
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
@@ -396,6 +432,9 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
         writable_file(json_path, "the --json file")
     if plot_path:
         writable_file(plot_path, "the --plot image", PLOT_FORMATS)
+    if scale:
+        return _bench_scale(scale_sizes, res or 1024, n_frames, threads, accel if accel != "grid" else None,
+                            json_path, plot_path)
     if error_report:
         from anim.measure.error_study import run_error_report
         from anim.measure.image_error import RES as IMAGE_STUDY_RES

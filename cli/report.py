@@ -151,6 +151,32 @@ def bench_table(rows, console=None):
                       "(shade 0) and rays made before the clock starts, both in their favour")
 
 
+def scale_table(result, console=None):
+    """bench --scale: a row per size (frustrace's phases, Embree's, memory),
+    then each phase's growth exponent."""
+    columns = [("triangles", None), ("accel", 2), ("interp", 3), ("build", None), ("trace", None),
+               ("shade", None), ("shadow", None), ("frame", None), ("frame 0 warm-up s", 1),
+               ("peak RSS GB", None), ("bytes/tri", None), ("Embree build/trace/shadow", 0)]
+    cells = []
+    for r in result["rows"]:
+        e = r.get("embree")
+        cells.append([f"{r['triangles']:,}", r["accel"], f"{r['interp_ms']:.1f}", f"{r['build_ms']:.1f}",
+                      f"{r['trace_ms']:.1f}", f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}",
+                      f"{r['frame_ms']:.1f}", f"{r['warm_up_s']:.1f}", f"{r['peak_rss_gb']:.2f}",
+                      f"{r['bytes_per_triangle']:.0f}",
+                      f"{e['build_ms']:.0f}/{e['trace_ms']:.0f}/{e['shadow_ms']:.0f}" if e else "-"])
+    g = result["growth"]
+    cells.append(["growth exponent", "", *(f"{g[k]:.2f}" if g[k] is not None else "-"
+                                           for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms",
+                                                     "frame_ms")), "", "", "",
+                  "/".join(f"{v:.2f}" if v is not None else "-" for v in result.get("embree_growth", {}).values())
+                  or "-"])
+    console = console or (Console() if Console().is_terminal else Console(width=190))
+    console.print(fitted_table(f"frustrace bench --scale ({result['resolution']}^2, {result['frames']} frames, "
+                               "median ms a frame; bytes/tri: peak RSS beyond the interpreter and the keyframes)",
+                               columns, cells, console.width, key=("triangles",)))
+
+
 def compare_table(result, console=None):
     """One row per structure, then the image differences against the first."""
     rows = result["rows"]
