@@ -116,7 +116,9 @@ class MotionBlur(Strict):
 
 
 class Render(Strict):
-    accel: Literal["grid", "kdtree", "bvh"] = "grid"
+    # structure of the camera rays; auto = chosen per scene and image size
+    # (anim/render/settings.auto_accel)
+    accel: Literal["auto", "grid", "kdtree", "bvh"] = "auto"
     # structure of the shadow rays; None = the measured fastest (raycore.config.SHADOW_ACCEL)
     shadow_accel: Optional[Literal["grid", "kdtree", "bvh"]] = None
     packet: int = 32           # one of raycore.config.PACKET_SIZES

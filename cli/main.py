@@ -210,7 +210,7 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
 @click.option("-o", "--out-dir", type=click.Path(file_okay=False, path_type=Path),
               help="Directory for the frames (default: output.path of the scene, relative to it).")
 @click.option("--frames", "frames_text", metavar="A:B", help="Render frames A to B inclusive (default: all of frames.start..end).")
-@click.option("--accel", type=click.Choice(ACCELS), help="Acceleration structure of the camera rays: the per-frame uniform grid, an SAH kd-tree with frustum traversal, or the per-frame BVH (default: render.accel, grid).")
+@click.option("--accel", type=click.Choice(("auto", *ACCELS)), help="Acceleration structure of the camera rays: auto (chosen by the scene's triangles per pixel, as measured), the per-frame uniform grid, an SAH kd-tree with frustum traversal, or the per-frame BVH (default: render.accel, auto).")
 @click.option("--shadow-accel", type=click.Choice(ACCELS), help="Acceleration structure of the shadow rays (default: render.shadow_accel, else bvh, measured fastest).")
 @click.option("--packet", type=click.Choice([str(p) for p in PACKET_SIZES]), help="Primary-ray packet size N of the grid (NxN rays per frustum; default: render.packet, else 32). The kd-tree and the BVH always use 8x8.")
 @click.option("--threads", type=click.IntRange(0, 1024), default=0, show_default=True, help="Render threads; 0 = all cores.")

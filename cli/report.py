@@ -92,7 +92,7 @@ def summary_table(stats):
     compiled = {**(run.get("compiled_by_helper") or {}), **(run.get("compiled") or {})}
     med = s["median_ms"]
     table = Table(title=f"{stats['scene']}  {stats['resolution'][0]}x{stats['resolution'][1]}  "
-                        f"packet {stats['packet']}  threads {stats['threads']}  "
+                        f"{stats['accel']}  packet {stats['packet']}  threads {stats['threads']}  "
                         f"{len(stats['frames'])} frames (median ms per frame)")
     for col in ("interp", "build", "trace", "shade", "shadow", "write"):
         table.add_column(col, justify="right")
@@ -100,6 +100,8 @@ def summary_table(stats):
                     for k in ("interp", "build", "trace", "shade", "shadow", "write")))
     console = Console()
     console.print(table)
+    if stats.get("accel_choice"):
+        console.print(f"camera rays: {stats['accel_choice']}")
     warm = s.get("warm_up_s", s["compile_s"])
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
                   f"fps_wall {s['fps_wall']:.1f}   warm-up {warm:.2f} s (not in fps; "

@@ -75,6 +75,7 @@ class RenderConfig:
     spp: int = 1                   # samples per pixel (1 = exact pixel-centre ray)
     shadows: bool = True           # cast shadow rays to every light
     accel: str = "grid"            # acceleration structure of camera rays (and of every ray by default)
+    accel_choice: str = ""         # why: what render.accel: auto measured and chose ("" when named)
     shadow_accel: str = ""         # structure of shadow rays; "" = SHADOW_ACCEL (measured fastest)
     grid_density: float = 0.25     # lambda: grid cells ~= lambda * triangles (0.25 measured best)
     background: tuple = (0.0, 0.0, 0.0)

@@ -10,8 +10,31 @@ from raycore.frame import Shading
 from raycore.images.image_io import read_texture
 
 
+# render.accel: auto, measured on every built-in scene at 128^2-1024^2 and a
+# deforming torus of 100K-10M triangles (docs/performance.md, which structure
+# for camera rays): the BVH's refit and camera packets cost less than the
+# grid's rebuild and walk once triangles outnumber pixels by more than about
+# this much; scenes that are mostly static rebin only their moving part in
+# the grid, which keeps it ahead up to more triangles a pixel
+AUTO_TRIANGLES_PER_PIXEL = 0.2
+AUTO_TRIANGLES_PER_PIXEL_STATIC = 1.5
+STATIC_SHARE = 0.9                 # "mostly static": at least this share of the triangles never moves
+
+
+def auto_accel(n_triangles: int, n_moving: int, pixels: int) -> tuple:
+    """(structure of the camera rays, why) for render.accel: auto."""
+    density = n_triangles / max(pixels, 1)
+    static = n_triangles > 0 and n_triangles - n_moving >= STATIC_SHARE * n_triangles
+    limit = AUTO_TRIANGLES_PER_PIXEL_STATIC if static else AUTO_TRIANGLES_PER_PIXEL
+    name = "bvh" if density > limit else "grid"
+    return name, (f"auto: {name} ({n_triangles:,} triangles, {density:.2f} a pixel, "
+                  f"{'above' if name == 'bvh' else 'at most'} {limit:g} for a "
+                  f"{'mostly static' if static else 'moving'} scene)")
+
+
 def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
-    """The scene file's render settings, with command-line overrides."""
+    """The scene file's render settings, with command-line overrides;
+    render.accel: auto resolved to a structure for this scene and size."""
     spec = scene.spec
     base = dict(width=spec.output.resolution[0], height=spec.output.resolution[1],
                 packet=spec.render.packet, spp=spec.render.spp, shadows=spec.render.shadows,
@@ -22,6 +45,11 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
                 shutter_position=spec.render.motion_blur.position,
                 aperture_radius=spec.camera.aperture_radius, focus_distance=spec.camera.focus_distance or 0.0)
     base.update({k: v for k, v in overrides.items() if v is not None})
+    if base["accel"] == "auto":
+        moving = scene.moving_triangles
+        n = int(scene.faces.shape[0])
+        base["accel"], base["accel_choice"] = auto_accel(n, n if moving is None else len(moving),
+                                                         base["width"] * base["height"])
     return RenderConfig(**base)
 
 
@@ -40,15 +68,15 @@ def render_config(scene: AnimatedScene, *, accel=None, shadow_accel=None, packet
         n_threads = max(1, (os.cpu_count() or 1) // workers)
     elif scheduler and not threads:
         n_threads = 0
-    structure = accel or scene.spec.render.accel
-    if packet and structure != "grid":
-        side = packet_of(structure, int(packet))
-        name = {"kdtree": "kd-tree", "bvh": "BVH"}[structure]
-        warnings.append(f"--packet is for the grid; the {name} traces {side}x{side} packets")
     width, height = res if res else (None, None)
     cfg = config_of(scene, packet=int(packet) if packet else None, threads=n_threads, spp=spp, max_error=max_error,
                     shadows=scene.spec.render.shadows and not no_shadows, accel=accel, shadow_accel=shadow_accel,
                     width=width, height=height, shutter=shutter, aovs=aovs)
+    if packet and cfg.accel != "grid":
+        side = packet_of(cfg.accel, int(packet))
+        name = {"kdtree": "kd-tree", "bvh": "BVH"}[cfg.accel]
+        warnings.append(f"--packet is for the grid; the {name} traces {side}x{side} packets"
+                        + (f" ({cfg.accel_choice})" if cfg.accel_choice else ""))
     if (blur := one_pass_blur_warning(cfg)) is not None:
         warnings.append(blur)
     return cfg, warnings

@@ -156,7 +156,8 @@ STRUCTURE_KEYS = ("grid_dims", "kd_nodes", "bvh_build_ms", "bvh_refit_ms", "bvh_
 def settings_of(cfg: RenderConfig) -> dict:
     """What decides a frame's pixels, recorded with every run; the packet
     size the accelerator really used (the kd-tree's and the BVH's are 8x8)."""
-    return {"accel": cfg.accel, "shadow_accel": cfg.shadow_structure,
+    return {"accel": cfg.accel, **({"accel_choice": cfg.accel_choice} if cfg.accel_choice else {}),
+            "shadow_accel": cfg.shadow_structure,
             "packet": packet_of(cfg.accel, cfg.packet),
             "threads": cfg.threads, "spp": cfg.spp, "shadows": cfg.shadows, "grid_density": cfg.grid_density,
             **({"max_error": cfg.max_error} if cfg.max_error > 0 else {}),
