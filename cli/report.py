@@ -92,7 +92,7 @@ def summary_table(stats):
     compiled = {**(run.get("compiled_by_helper") or {}), **(run.get("compiled") or {})}
     med = s["median_ms"]
     table = Table(title=f"{stats['scene']}  {stats['resolution'][0]}x{stats['resolution'][1]}  "
-                        f"{stats['accel']}  packet {stats['packet']}  threads {stats['threads']}  "
+                        f"{stats.get('accel', '')}  packet {stats['packet']}  threads {stats['threads']}  "
                         f"{len(stats['frames'])} frames (median ms per frame)")
     for col in ("interp", "build", "trace", "shade", "shadow", "write"):
         table.add_column(col, justify="right")
