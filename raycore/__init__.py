@@ -9,9 +9,10 @@ its own package); tests/test_import_graph.py checks it:
   images/      EXR and texture files
   grid/ kdtree/ bvh/   the three acceleration structures: build, traversal, drivers
   shading/     the visible surface, shading, the image's pixels
-  accelerators.py, adaptive.py, sweep.py, structures.py   one surface over the
-               structures, the error budget, the one-sweep shading pass, the
-               per-frame owner of the structures
+  accelerators.py, adaptive.py, sweep.py   one surface over the structures,
+               the error budget, the one-sweep shading pass
+  structures.py  the per-frame owner of the structures (built or refit as asked)
+  pass_scene.py  what one pass traces: structures and camera at its time and lens
   frame.py     one frame, phase by phase
 
 Nothing here imports `anim` or `cli`.

@@ -12,6 +12,7 @@ world space through each instance's geometry-to-world transform.
 """
 import atexit
 import os
+from pathlib import Path
 import pickle
 import struct
 import subprocess
@@ -95,35 +96,62 @@ class FbxObject:
         if not parts:
             raise SceneError(scene_path, key, f"{path.name}: the file has no mesh")
         self.take = self._take(info["takes"], animation, warnings)
-        faces, rests, slots, offset = [], [], [], 0
+        faces, rests, slots, uvs, gather, offset, unsplit = [], [], [], [], [], 0, 0
         for part in parts:
             rest = np.asarray(part["rest"], np.float64)
             counts = part["faces"][:, 1]
             order = np.concatenate([np.arange(b, b + n) for b, n in part["faces"]]) if len(counts) else \
                 np.zeros(0, np.int64)
-            tri, _, poly = triangulate(counts, part["index"][order], rest)
+            tri, corner, poly = triangulate(counts, part["index"][order], rest)
+            point_of = np.arange(len(rest))
+            uv = np.zeros((len(rest), 2))
+            if part["uv"] is not None:
+                # a vertex per distinct (point, uv): points split only along UV seams
+                corner_uv = np.asarray(part["uv"])[order[corner.reshape(-1)]]
+                keyed = np.concatenate([tri.reshape(-1, 1).astype(np.float64), corner_uv], axis=1)
+                unique, inverse = np.unique(keyed, axis=0, return_inverse=True)
+                point_of, uv, tri = unique[:, 0].astype(np.int64), unique[:, 1:3], inverse.reshape(-1, 3)
             faces.append(tri + offset)
             slots.append(part["face_material"][poly] if len(part["face_material"]) else np.full(len(tri), -1))
-            rests.append(rest)
-            offset += len(rest)
+            rests.append(rest[point_of])
+            uvs.append(uv)
+            gather.append(point_of + unsplit)
+            offset += len(point_of)
+            unsplit += len(rest)
         self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
         self.face_material = np.concatenate(slots).astype(np.int64)
         self.rest = np.concatenate(rests)
+        self.gather = np.concatenate(gather)           # output vertex -> the worker's (unsplit) point
         if not np.all(np.isfinite(self.rest)):
             raise SceneError(scene_path, key, f"{path.name}: inf or NaN among the mesh's points")
-        self.uvs = np.zeros((len(self.rest), 2), np.float32)
+        self.uvs = np.concatenate(uvs).astype(np.float32)
         self.materials = {}
         for m in info["materials"]:
-            if m["textured"]:
-                warnings.append(f"{key}: {path.name}: material {m['name']!r} has a texture, which frustrace "
-                                "does not read from FBX files yet: its colour is used")
             self.materials[m["slot"]] = pbr_material(f"{path.name}:{m['name']}", m["colour"], m["roughness"],
-                                                     m["metallic"])
+                                                     m["metallic"], self._texture(m))
         take = info["takes"][self.take] if self.take is not None else None
         self.t0, self.t1 = (take["begin"], take["end"]) if take else (0.0, 0.0)
         self.static = self.take is None or self.t1 <= self.t0
         self.rigid = False                      # skinned and blend-shaped meshes deform
         self.last = None
+
+    def _texture(self, material):
+        """A base-colour texture: the file the FBX names, looked for beside
+        the FBX first (files travel with the scene), then where it says;
+        else the image embedded in the file; None without one; exit 2 when
+        named but found nowhere."""
+        files = material["texture"]
+        if files is None:
+            return None
+        for name in (files["relative"], files["absolute"]):
+            if name and (self.path.parent / name).is_file():
+                return self.path.parent / name
+            if name and Path(name).name and (self.path.parent / Path(name).name).is_file():
+                return self.path.parent / Path(name).name
+        if files["content"]:
+            return files["content"], Path(files["relative"] or files["absolute"] or "x.png").suffix or ".png"
+        raise SceneError(self.scene_path, self.key, f"{self.path.name}: material {material['name']!r}: texture "
+                                                    f"file not found: {files['relative'] or files['absolute']}")
 
     def _take(self, takes, which, warnings):
         """The index of the take `animation:` names (the first when unset); None without takes."""
@@ -154,6 +182,7 @@ class FbxObject:
         else:
             pts = np.asarray(self.worker.call("evaluate", self.take, wrap_time(t, self.t0, self.t1,
                                                                              self.extrapolate)))
+            pts = pts[self.gather]
             if pts.shape != self.rest.shape or not np.all(np.isfinite(pts)):
                 raise SceneError(self.scene_path, self.key, f"{self.path.name}: the evaluated mesh at t = {t:g} "
                                                             "has inf or NaN points, or another vertex count")

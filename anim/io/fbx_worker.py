@@ -75,7 +75,13 @@ class Reader:
             local = [slot_of.setdefault(int(m.typed_id), len(slot_of)) for m in items(mesh.materials)]
             face_material = np.fromiter(items(mesh.face_material), np.int64) if len(hold(mesh.face_material)) \
                 else np.full(len(faces), -1, np.int64)
+            uv = hold(mesh.vertex_uv)
+            uvs = None
+            if uv.exists:
+                values = np.array([[v.x, v.y] for v in items(uv.values)], np.float64).reshape(-1, 2)
+                uvs = values[np.fromiter(items(uv.indices), np.int64)]          # per corner
             parts.append({"name": str(node.name), "index": index, "faces": np.array(faces, np.int64).reshape(-1, 2),
+                          "uv": uvs,
                           "rest": rest @ world[:, :3].T + world[:, 3],
                           "face_material": np.array([local[k] if 0 <= k < len(local) else -1
                                                      for k in face_material], np.int64)})
@@ -86,9 +92,15 @@ class Reader:
             colour = hold(hold(pbr.base_color).value_vec4)
             rough = hold(hold(pbr.roughness).value_vec4)
             metal = hold(hold(pbr.metalness).value_vec4)
+            texture = hold(hold(pbr.base_color).texture)
+            files = None
+            if texture is not None:
+                content = hold(texture.content)
+                files = {"relative": str(texture.relative_filename or ""), "absolute": str(texture.absolute_filename or ""),
+                         "content": bytes(content) if content is not None and len(content) else None}
             materials.append({"slot": slot_of[int(m.typed_id)], "name": str(m.name),
                               "colour": (colour.x, colour.y, colour.z), "roughness": rough.x,
-                              "metallic": metal.x, "textured": hold(pbr.base_color).texture is not None})
+                              "metallic": metal.x, "texture": files})
         takes = [{"name": str(t.name), "begin": float(t.time_begin), "end": float(t.time_end)} for t in self.takes]
         return {"parts": parts, "materials": materials, "takes": takes,
                 "fps": float(hold(self.scene.settings).frames_per_second)}

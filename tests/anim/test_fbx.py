@@ -74,3 +74,39 @@ def test_a_malformed_fbx_is_one_line_and_exit_2(tmp_path, damage):
             assert "bad.fbx" in res.output and len(res.output.strip().splitlines()) == 1, res.output
     if damage != "flipped":
         assert res.exit_code == 2
+
+
+def test_an_fbx_materials_texture_is_read_with_its_uvs(tmp_path):
+    """Blender's FBX of a plane with a 4x4 checker on its base colour
+    (tests/blender/textured.fbx, written by assets/make_blender_textured.py):
+    the image is found beside the file, the UVs come per corner (points
+    split only at UV seams), and the render shows the checker's two colours;
+    a texture named but found nowhere is exit 2."""
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
+    from anim.scene import AnimatedScene
+    here = CHAR.parent
+    for name in ("textured.fbx", "checker.png"):
+        (tmp_path / name).write_bytes((here / name).read_bytes())
+    path = tmp_path / "s.yaml"
+    path.write_text("""version: 1
+frames: {start: 0, end: 0, fps: 24}
+output: {path: out/f_##.exr, resolution: [32, 32]}
+camera: {eye: [0, 3, 0.001], look_at: [0, 0, 0], fov: 40}
+lights: [{position: [0, 3, 0], intensity: 20}]
+objects:
+  - name: plane
+    mesh: textured.fbx
+""")
+    scene = AnimatedScene(path)
+    shading = shading_of(scene)
+    assert shading.tex_info.tolist() == [[0, 4, 4]]
+    assert scene.uvs.min() == 0.0 and scene.uvs.max() == 1.0
+    _, result = SceneRenderer(scene, config_of(scene, ambient=0.0), shading).render(0.0)
+    rgb = result.rgba[..., :3].astype(np.float64)
+    lit = rgb.sum(axis=-1) > 0
+    redder, bluer = lit & (rgb[..., 0] > 2 * rgb[..., 2]), lit & (rgb[..., 2] > 2 * rgb[..., 0])
+    assert redder.sum() > 50 and bluer.sum() > 50
+    (tmp_path / "checker.png").unlink()
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "texture file not found" in res.output and "checker.png" in res.output
