@@ -293,8 +293,12 @@ def connect(scheduler=None, workers=None, security=None):
         before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
         try:
             _fork_workers_from_a_server()
+            # the workers' own logs stay quiet: a task's failure reaches this
+            # process through its future (one line, exit 1), and what a worker
+            # logs while the render stops it (a heartbeat to the scheduler
+            # that has just closed, on a loaded host) is teardown noise
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+                                   host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL)
         finally:
             if main_thread:
                 signal.signal(signal.SIGINT, before)
