@@ -102,7 +102,12 @@ class FbxObject:
             counts = part["faces"][:, 1]
             order = np.concatenate([np.arange(b, b + n) for b, n in part["faces"]]) if len(counts) else \
                 np.zeros(0, np.int64)
-            tri, corner, poly = triangulate(counts, part["index"][order], rest)
+            index = part["index"]
+            if len(order) and (order.max() >= len(index) or order.min() < 0 or
+                               (len(index) and (index.max() >= len(rest) or index.min() < 0))):
+                raise SceneError(scene_path, key, f"{path.name}: mesh {part['name']!r} has a face index "
+                                                  f"beyond its {len(rest)} vertices")
+            tri, corner, poly = triangulate(counts, index[order], rest)
             point_of = np.arange(len(rest))
             uv = np.zeros((len(rest), 2))
             if part["uv"] is not None:
@@ -133,7 +138,6 @@ class FbxObject:
         self.t0, self.t1 = (take["begin"], take["end"]) if take else (0.0, 0.0)
         self.static = self.take is None or self.t1 <= self.t0
         self.rigid = False                      # skinned and blend-shaped meshes deform
-        self.last = None
 
     def _texture(self, material):
         """A base-colour texture: the file the FBX names, looked for beside
