@@ -22,7 +22,7 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.interpolate import wrap_time
-from anim.io.polygons import triangulate
+from anim.io.polygons import split_at_seams, triangulate
 from anim.materials import pbr_material
 
 _WORKERS = []
@@ -112,10 +112,7 @@ class FbxObject:
             uv = np.zeros((len(rest), 2))
             if part["uv"] is not None:
                 # a vertex per distinct (point, uv): points split only along UV seams
-                corner_uv = np.asarray(part["uv"])[order[corner.reshape(-1)]]
-                keyed = np.concatenate([tri.reshape(-1, 1).astype(np.float64), corner_uv], axis=1)
-                unique, inverse = np.unique(keyed, axis=0, return_inverse=True)
-                point_of, uv, tri = unique[:, 0].astype(np.int64), unique[:, 1:3], inverse.reshape(-1, 3)
+                point_of, uv, tri = split_at_seams(tri, np.asarray(part["uv"])[order[corner.reshape(-1)]])
             faces.append(tri + offset)
             slots.append(part["face_material"][poly] if len(part["face_material"]) else np.full(len(tri), -1))
             rests.append(rest[point_of])

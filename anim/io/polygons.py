@@ -12,6 +12,19 @@ quads is checked in well under a second.
 import numpy as np
 
 
+def split_at_seams(faces, *corner_values):
+    """Vertices split only where a point's corners differ: (point_of (k,) the
+    point of each new vertex, its values (k, c) from corner_values, faces
+    (n_t, 3) over the new vertices). faces (n_t, 3) are point ids; each of
+    corner_values has a row of values per corner, in faces' order (UVs,
+    normal ids): a vertex per distinct (point, values)."""
+    n = faces.size
+    keyed = np.concatenate([faces.reshape(n, 1).astype(np.float64),
+                            *(np.asarray(v, np.float64).reshape(n, -1) for v in corner_values)], axis=1)
+    unique, inverse = np.unique(keyed, axis=0, return_inverse=True)
+    return unique[:, 0].astype(np.int64), unique[:, 1:], inverse.reshape(-1, 3)
+
+
 def fan(counts, starts):
     """(corner (n_t, 3) indices into the polygons' corner list, polygon of
     each triangle): each polygon fanned from its first corner."""

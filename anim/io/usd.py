@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from anim.errors import SceneError
-from anim.io.polygons import triangulate
+from anim.io.polygons import split_at_seams, triangulate
 from anim.materials import DEFAULT_MATERIAL, pbr_material
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -201,19 +201,13 @@ class _Mesh:
         """Faces over vertices that split points where a corner's UV (per
         corner, face-varying) or authored normal (seams: a normal id per
         corner) differs: a vertex per distinct (point, uv, normal)."""
-        columns = [faces.reshape(-1, 1).astype(np.float64)]
+        if corner_uv is None and self.uvs is not None:
+            corner_uv = self.uvs[faces.reshape(-1)]
+        values = [v for v in (corner_uv, seams) if v is not None]
+        self.point_of, kept, faces = split_at_seams(faces, *values)
         if corner_uv is not None:
-            columns.append(corner_uv)
-        elif self.uvs is not None:
-            columns.append(self.uvs[faces.reshape(-1)].astype(np.float64))
-        if seams is not None:
-            columns.append(seams.reshape(-1, 1).astype(np.float64))
-        keyed = np.concatenate(columns, axis=1)
-        unique, inverse = np.unique(keyed, axis=0, return_inverse=True)
-        self.point_of = unique[:, 0].astype(np.int64)
-        if len(columns) > 1 and (corner_uv is not None or self.uvs is not None):
-            self.uvs = unique[:, 1:3].astype(np.float32)
-        return inverse.reshape(-1, 3)
+            self.uvs = kept[:, :2].astype(np.float32)
+        return faces
 
     @property
     def n_vertices(self):
