@@ -59,20 +59,25 @@ _UniqueKeyLoader.add_implicit_resolver(
 
 
 def read_scene_file(path, camera=None, notes=None) -> SceneFile:
-    """The validated scene of a scene file, or of a whole USD stage (with
-    `camera`, a camera prim path; what the stage gave appended to notes)."""
+    """The validated scene of a scene file, or of a whole USD stage or FBX
+    file (with `camera`, a camera's prim path or node name; what the file
+    gave appended to notes)."""
     path = Path(path)
-    if is_usd(path):
-        data, usd_notes = scene_of_stage(path, camera)
+    if is_usd(path) or path.suffix.lower() == ".fbx":
+        if is_usd(path):
+            data, file_notes = scene_of_stage(path, camera)
+        else:
+            from anim.io.fbx_scene import scene_of_fbx          # a ufbx process only for FBX files
+            data, file_notes = scene_of_fbx(path, camera)
         if notes is not None:
-            notes.extend(usd_notes)
+            notes.extend(file_notes)
         try:
             return parse_scene(data)
         except ValidationError as exc:
             err = exc.errors()[0]
-            raise SceneError(path, _key_path(err["loc"]) or "(top)", f"from the stage: {err['msg']}") from None
+            raise SceneError(path, _key_path(err["loc"]) or "(top)", f"from the file: {err['msg']}") from None
     if camera is not None:
-        raise SceneError(path, "--camera", "chooses a camera of a USD stage; this is a scene file")
+        raise SceneError(path, "--camera", "chooses a camera of a USD stage or FBX file; this is a scene file")
     try:
         text = path.read_text()
     except FileNotFoundError:
@@ -146,9 +151,6 @@ class SceneObject:
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
         elif spec.mesh.lower().endswith(".fbx"):
             from anim.io.fbx import FbxObject            # a ufbx process only for scenes with FBX files
-            if spec.animation == "all" or isinstance(spec.animation, list):
-                raise SceneError(scene_path, f"{key}.animation", "an FBX file plays one take at a time: "
-                                                                 "name it or give its index")
             self.fbx = FbxObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
                                  warnings)
             self.base, self.faces, self.uvs = self.fbx.rest.astype(np.float32), self.fbx.faces, self.fbx.uvs
@@ -363,7 +365,9 @@ class AnimatedScene:
                 refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
             if o.skeleton:
                 refs.append((f"objects.{i}.skeleton.weights", o.skeleton.weights))
-        # what a USD file brings along (sublayers, references, textures) travels with it
+        # what a USD or FBX file brings along (sublayers, references, textures) travels with it
+        refs += [(f"objects.{i}.mesh", str(f)) for i, o in enumerate(self.objects) if o.fbx is not None
+                 for f in o.fbx.texture_files]
         seen = set()
         for i, o in enumerate(spec.objects):
             stage = (base / o.mesh).resolve() if o.mesh and is_usd(o.mesh) else None

@@ -135,7 +135,7 @@ def main():
 
 
 def load_scene(path, camera=None):
-    """AnimatedScene of path (a scene file or a USD stage), its warnings
+    """AnimatedScene of path (a scene file, a USD stage or an FBX file), its warnings
     printed on stderr."""
     from anim.scene import AnimatedScene
     scene = AnimatedScene(path, camera)
@@ -201,7 +201,8 @@ def parse_frames(text, scene):
     return range(start, end + 1)
 
 
-CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the stage's first camera)."
+CAMERA_HELP = ("For a USD stage: the camera prim to look through (default: the stage's first camera); "
+               "for an FBX file: the camera's node name.")
 
 
 @main.command()
@@ -224,7 +225,7 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
               help="Motion blur: the shutter is open S frame intervals (default: render.motion_blur.shutter, "
                    "0 = off; 0.5 = a 180-degree shutter). Each of the --spp passes takes one time in it.")
 @click.option("--aov", "aovs", metavar="N,P,id", callback=lambda ctx, param, v: _aovs(v),
-              help="Extra EXR channels, as output.aovs (default: output.aovs, none for a USD stage): "
+              help="Extra EXR channels, as output.aovs (default: output.aovs, none for a USD stage or FBX file): "
                    "N (smooth normal), P (position), id (triangle index).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write stats.json (default: next to the frames); merged with an earlier run's by frame number.")
 @click.option("--resume", is_flag=True, help="Skip frames already written whole (a truncated or foreign file is rendered again); "
@@ -251,8 +252,8 @@ CAMERA_HELP = "For a USD stage: the camera prim to look through (default: the st
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
 def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrite, quiet, preview_path, workers,
            scheduler, chunk, tls_ca, tls_cert, tls_key, **settings):
-    """Render ANIM_YAML (a scene file, or a USD stage: .usd, .usda, .usdc,
-    .usdz) to one OpenEXR file per frame, plus stats.json."""
+    """Render ANIM_YAML (a scene file, a USD stage: .usd, .usda, .usdc,
+    .usdz, or an FBX file) to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
     if workers and scheduler:
@@ -488,11 +489,11 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path), help="Write the table as JSON.")
 @click.option("--shadow-accel", type=click.Choice(ACCELS),
               help="Structure of every row's shadow rays (default: render.shadow_accel, else bvh).")
-@click.option("--camera", metavar="PRIM", help="For a USD stage: the camera prim to look through.")
+@click.option("--camera", metavar="PRIM", help=CAMERA_HELP)
 def compare(structures, scene_name, n_frames, res, threads, json_path, shadow_accel, camera):
     """Compare the camera rays' acceleration structures on one scene:
     `compare grid vs kdtree [vs bvh] [ANIM.yaml | --scene NAME]` (ANIM.yaml
-    may be a USD stage). Structures: grid, grid-nocull (no frustum culling,
+    may be a USD stage or an FBX file). Structures: grid, grid-nocull (no frustum culling,
     no mailboxes), kdtree, bvh. Every row's shadow rays go through one
     structure (--shadow-accel). Prints build and trace ms, fps, ray/triangle
     tests and cells/nodes per packet for each, and the largest image difference."""
@@ -588,7 +589,7 @@ def assets_make(name, out_dir, preview_path, overwrite):
 def check(anim_yaml, camera, strict):
     """Validate ANIM_YAML (schema, meshes, keys, camera at every frame,
     textures) and summarise it; render nothing. What passes here, `render`
-    accepts. A USD stage is described: what came from it, what from
+    accepts. A USD stage or FBX file is described: what came from it, what from
     frustrace's defaults."""
     from anim.render.settings import config_of, one_pass_blur_warning, shading_of
     scene = load_scene(anim_yaml, camera)

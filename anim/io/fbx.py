@@ -1,6 +1,7 @@
 """FBX objects (`mesh: char.fbx`): meshes, skinning, blend shapes and node
 animation as ufbx evaluates them, with the file's takes chosen by
-`animation:` (a name or an index, the first by default).
+`animation:` (a name or an index, the first by default; `all` or a list
+of takes: each part moves as the take that animates it, see take_of).
 
 ufbx (the official binding of the ufbx C library) runs in a process of its
 own (fbx_worker.py): the binding can crash the interpreter, and a crash
@@ -60,11 +61,16 @@ class FbxWorker:
             status, value = pickle.loads(self.proc.stdout.read(n))
         except (BrokenPipeError, EOFError, OSError, pickle.UnpicklingError):
             code = self.proc.poll()
-            raise SceneError(self.scene_path, self.key, f"{self.path.name}: the FBX reader (ufbx) stopped "
+            raise SceneError(self.scene_path, self.key, f"{self._name}the FBX reader (ufbx) stopped "
                                                         f"reading it (exit {code}): a malformed file") from None
         if status != "ok":
-            raise SceneError(self.scene_path, self.key, f"{self.path.name}: cannot read FBX: {value}")
+            raise SceneError(self.scene_path, self.key, f"{self._name}cannot read FBX: {value}")
         return value
+
+    @property
+    def _name(self):
+        """The file's name to start a message with, unless the error already names it."""
+        return "" if Path(self.scene_path) == Path(self.path) else f"{Path(self.path).name}: "
 
     def close(self):
         if self.proc.poll() is None:
@@ -73,6 +79,24 @@ class FbxWorker:
                 self.proc.wait(timeout=5)
             except (OSError, subprocess.TimeoutExpired):
                 self.proc.kill()
+
+
+def take_of(drivers, takes, allowed):
+    """(the take that moves an element, a note or None): among the `allowed`
+    takes, those that animate one of its `drivers` ({node id: name}: its
+    node, bones and their ancestors). Several: the one named
+    "<driver>|<driver>Action" (Blender writes a take per object and every
+    action that fits it, and an object's own action is "<object>Action"),
+    else the first, with a note naming the others. None: no take moves it."""
+    movers = [k for k in allowed if set(drivers) & set(takes[k]["nodes"])]
+    if len(movers) <= 1:
+        return (movers[0] if movers else None), None
+    names = {n for n in drivers.values() if n}
+    own = [k for k in movers if takes[k]["name"] in {f"{n}|{n}Action" for n in names}]
+    if own:
+        return own[0], None
+    return movers[0], (f"moved by {len(movers)} takes ({', '.join(takes[k]['name'] for k in movers)}); the first "
+                       "plays (a list of takes under 'animation:' chooses)")
 
 
 def _package_root():
@@ -95,7 +119,8 @@ class FbxObject:
         parts = info["parts"]
         if not parts:
             raise SceneError(scene_path, key, f"{path.name}: the file has no mesh")
-        self.take = self._take(info["takes"], animation, warnings)
+        self.takes = info["takes"]
+        self.take_of_part = self._takes(parts, animation, warnings)
         faces, rests, slots, uvs, gather, offset, unsplit = [], [], [], [], [], 0, 0
         for part in parts:
             rest = np.asarray(part["rest"], np.float64)
@@ -110,9 +135,19 @@ class FbxObject:
             tri, corner, poly = triangulate(counts, index[order], rest)
             point_of = np.arange(len(rest))
             uv = np.zeros((len(rest), 2))
+            seams = []                     # per-corner values whose changes split a point
             if part["uv"] is not None:
-                # a vertex per distinct (point, uv): points split only along UV seams
-                point_of, uv, tri = split_at_seams(tri, np.asarray(part["uv"])[order[corner.reshape(-1)]])
+                seams.append(np.asarray(part["uv"])[order[corner.reshape(-1)]])
+            if part.get("normals") is not None:
+                # the file's normals where they differ between one point's corners (hard edges);
+                # a normal id per distinct direction (rounded: the same normal written twice)
+                _, ids = np.unique(np.round(np.asarray(part["normals"]), 6), axis=0, return_inverse=True)
+                seams.append(ids.reshape(-1)[order[corner.reshape(-1)]][:, None].astype(np.float64))
+            if seams:
+                # a vertex per distinct (point, uv, normal): points split only along seams
+                point_of, kept, tri = split_at_seams(tri, *seams)
+                if part["uv"] is not None:
+                    uv = kept[:, :2]
             faces.append(tri + offset)
             slots.append(part["face_material"][poly] if len(part["face_material"]) else np.full(len(tri), -1))
             rests.append(rest[point_of])
@@ -123,17 +158,20 @@ class FbxObject:
         self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
         self.face_material = np.concatenate(slots).astype(np.int64)
         self.rest = np.concatenate(rests)
+        self.part_rest = [np.asarray(p["rest"], np.float64) for p in parts]   # unsplit, for parts left at rest
         self.gather = np.concatenate(gather)           # output vertex -> the worker's (unsplit) point
         if not np.all(np.isfinite(self.rest)):
             raise SceneError(scene_path, key, f"{path.name}: inf or NaN among the mesh's points")
         self.uvs = np.concatenate(uvs).astype(np.float32)
         self.materials = {}
+        self.texture_files = []            # the image files it reads (they travel with it to a cluster)
         for m in info["materials"]:
             self.materials[m["slot"]] = pbr_material(f"{path.name}:{m['name']}", m["colour"], m["roughness"],
                                                      m["metallic"], self._texture(m))
-        take = info["takes"][self.take] if self.take is not None else None
-        self.t0, self.t1 = (take["begin"], take["end"]) if take else (0.0, 0.0)
-        self.static = self.take is None or self.t1 <= self.t0
+        played = [self.takes[k] for k in set(self.take_of_part) if k is not None]
+        self.t0 = min((k["begin"] for k in played), default=0.0)
+        self.t1 = max((k["end"] for k in played), default=0.0)
+        self.static = not played or self.t1 <= self.t0
         self.rigid = False                      # skinned and blend-shaped meshes deform
 
     def _texture(self, material):
@@ -145,31 +183,45 @@ class FbxObject:
         if files is None:
             return None
         for name in (files["relative"], files["absolute"]):
-            if name and (self.path.parent / name).is_file():
-                return self.path.parent / name
-            if name and Path(name).name and (self.path.parent / Path(name).name).is_file():
-                return self.path.parent / Path(name).name
+            for found in ((self.path.parent / name), (self.path.parent / Path(name).name)):
+                if name and Path(name).name and found.is_file():
+                    self.texture_files.append(found)
+                    return found
         if files["content"]:
             return files["content"], Path(files["relative"] or files["absolute"] or "x.png").suffix or ".png"
         raise SceneError(self.scene_path, self.key, f"{self.path.name}: material {material['name']!r}: texture "
                                                     f"file not found: {files['relative'] or files['absolute']}")
 
-    def _take(self, takes, which, warnings):
-        """The index of the take `animation:` names (the first when unset); None without takes."""
-        anim_key = self.key.rsplit(".", 1)[0] + ".animation"
+    def _takes(self, parts, which, warnings):
+        """The take each part plays (None: at rest): the one `animation:`
+        names (the first when unset), or for `all` or a list of takes the
+        one that animates the part (take_of)."""
+        takes, anim_key = self.takes, self.key.rsplit(".", 1)[0] + ".animation"
         if not takes:
             if which is not None:
                 raise SceneError(self.scene_path, anim_key, f"{self.path.name}: animation {which!r} requested, "
                                                             "but the file has no takes")
-            return None
+            return [None] * len(parts)
         names = [t["name"] for t in takes]
         if which is None:
             if len(takes) > 1:
                 warnings.append(f"{self.key}: {self.path.name} has {len(takes)} takes ({', '.join(names)}); "
-                                f"the first plays ('animation:' chooses, key {anim_key})")
-            return 0
+                                f"the first plays ('animation:' chooses, key {anim_key}: a take, or all)")
+            return [0] * len(parts)
+        if which == "all" or isinstance(which, list):
+            allowed = range(len(takes)) if which == "all" else [self._take_index(w, names, anim_key) for w in which]
+            chosen = []
+            for part in parts:
+                k, note = take_of(part["drivers"], takes, allowed)
+                chosen.append(k)
+                if note:
+                    warnings.append(f"{anim_key}: {self.path.name}: mesh {part['name']!r}: {note}")
+            return chosen
+        return [self._take_index(which, names, anim_key)] * len(parts)
+
+    def _take_index(self, which, names, anim_key):
         if isinstance(which, int) and not isinstance(which, bool):
-            if 0 <= which < len(takes):
+            if 0 <= which < len(names):
                 return which
         elif which in names:
             return names.index(which)
@@ -181,8 +233,8 @@ class FbxObject:
         if self.static:
             pts = self.rest
         else:
-            pts = np.asarray(self.worker.call("evaluate", self.take, wrap_time(t, self.t0, self.t1,
-                                                                             self.extrapolate)))
+            moved = self.worker.call("evaluate", self.take_of_part, wrap_time(t, self.t0, self.t1, self.extrapolate))
+            pts = np.concatenate([rest if p is None else np.asarray(p) for p, rest in zip(moved, self.part_rest)])
             pts = pts[self.gather]
             if pts.shape != self.rest.shape or not np.all(np.isfinite(pts)):
                 raise SceneError(self.scene_path, self.key, f"{self.path.name}: the evaluated mesh at t = {t:g} "

@@ -39,7 +39,7 @@ class Bundle(NamedTuple):
     scene_name: str
     files: dict
     digest: str
-    camera: str = None        # a USD stage's chosen camera (render --camera)
+    camera: str = None        # a USD stage's or FBX file's chosen camera (render --camera)
 
 
 def referenced_files(scene) -> list:
@@ -59,6 +59,9 @@ def referenced_files(scene) -> list:
             refs.append((f"objects.{i}.mesh", o.mesh))
             if o.mesh.lower().endswith(".gltf"):
                 refs += [(f"objects.{i}.mesh", uri) for uri in _gltf_uris(base / o.mesh, o.mesh)]
+            if o.mesh.lower().endswith(".fbx"):                   # its textures, found beside it
+                refs += [(f"objects.{i}.mesh", os.path.relpath(f, base))
+                         for f in scene.objects[i].fbx.texture_files]
             if is_usd(o.mesh) and o.mesh not in usd_done:       # a stage's objects share its files
                 usd_done.add(o.mesh)
                 refs += [(f"objects.{i}.mesh", ref) for ref in _usd_files(base, o.mesh, scene.path, i)]

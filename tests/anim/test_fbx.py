@@ -39,8 +39,11 @@ def test_takes_are_chosen_by_name_or_index_and_a_wrong_one_is_named(tmp_path):
     np.testing.assert_array_equal(first.vertices_at(t), by_name.vertices_at(t))
     np.testing.assert_array_equal(first.vertices_at(t), by_index.vertices_at(t))
     assert not np.array_equal(first.vertices_at(first.time_of(0)).copy(), first.vertices_at(t))
+    # one take, so `all` and a list of it play it too
+    for extra in ("    animation: all\n", "    animation: [rig|rigAction]\n"):
+        np.testing.assert_array_equal(first.vertices_at(t), AnimatedScene(_scene(tmp_path, extra=extra)).vertices_at(t))
     for extra, words in (("    animation: walk\n", "no take 'walk'"), ("    animation: 3\n", "no take 3"),
-                         ("    animation: all\n", "one take at a time")):
+                         ("    animation: [0, run]\n", "no take 'run'")):
         res = CliRunner().invoke(main, ["check", str(_scene(tmp_path, extra=extra))])
         assert res.exit_code == 2 and "objects.0.animation" in res.output and words in res.output, res.output
         assert len(res.output.strip().splitlines()) == 1
