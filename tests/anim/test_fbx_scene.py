@@ -140,10 +140,13 @@ def test_a_whole_fbx_without_camera_or_lights_gets_a_default_view_and_a_light(tm
     assert np.isfinite(pix[..., names.index("Z")]).any()
 
 
-def test_a_missing_camera_or_file_is_one_line_and_exit_2(tmp_path):
+def test_a_missing_camera_a_missing_file_or_a_cut_file_is_one_line_and_exit_2(tmp_path):
     _copy(tmp_path)
+    (tmp_path / "cut.fbx").write_bytes((HERE / "shot.fbx").read_bytes()[:60000])
     for args, words in (([str(tmp_path / "shot.fbx"), "--camera", "Nope"], "no camera 'Nope'"),
-                        ([str(tmp_path / "none.fbx")], "not found")):
-        res = CliRunner().invoke(main, ["check", *args])
-        assert res.exit_code == 2 and words in res.output, res.output
-        assert len(res.output.strip().splitlines()) == 1
+                        ([str(tmp_path / "none.fbx")], "not found"),
+                        ([str(tmp_path / "cut.fbx")], "FBX")):
+        for command in ("check", "render"):
+            res = CliRunner().invoke(main, [command, *args])
+            assert res.exit_code == 2 and words in res.output, res.output
+            assert len(res.output.strip().splitlines()) == 1
