@@ -15,6 +15,7 @@ from pydantic import ValidationError
 
 from anim.area_lights import emitter_positions
 from anim.errors import SceneError
+from anim.instances import InstanceTable
 from anim.interpolate import Curve
 from anim.materials import DEFAULT_MATERIAL
 from anim.io.mesh_io import load_mesh, vertex_lines
@@ -24,7 +25,7 @@ from anim.schema import SceneFile, parse_scene
 from anim.io.usd import UsdObject, is_usd, scene_of_stage
 from anim.io.usd import dependencies as usd_dependencies
 from anim.tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
-from anim.vertex_kernels import skin_into, transform_into
+from anim.vertex_kernels import instances_into, skin_into, transform_into
 
 
 def _key_path(loc):
@@ -180,12 +181,37 @@ class SceneObject:
                        and (self.skeleton is None or self.skeleton.constant)
                        and (self.file is None or self.file.static)
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
+        self.n_vertices = len(self.base)
+        self.instances = None
+        if spec.instances is not None:
+            self._instance(spec, base, scene_path, key, owner)
+
+    def _instance(self, spec, base, scene_path, key, owner):
+        """Copies of this object by an instance table (anim/instances.py):
+        the faces (and UVs) repeated a copy after another; the object as
+        written becomes the prototype, placed into a buffer of its own."""
+        table = InstanceTable(spec.instances, base, scene_path, f"{key}.instances", owner, spec.extrapolate)
+        nv = len(self.base)
+        if table.n * max(nv, len(self.faces)) >= 2 ** 31:
+            raise SceneError(scene_path, f"{key}.instances", f"{table.n} copies of {len(self.faces)} triangles "
+                                                             "are more than 2^31 vertices or triangles")
+        self.instances = table
+        self.proto_faces = self.faces
+        self.faces = np.ascontiguousarray((self.faces[None] + (np.arange(table.n) * nv)[:, None, None])
+                                          .reshape(-1, 3), np.int32)
+        if self.uvs is not None:
+            self.uvs = np.tile(self.uvs, (table.n, 1))
+        self.n_vertices = table.n * nv
+        self._proto = np.empty((nv, 3), np.float32)
+        self.rigid = False
+        self.static = self.static and table.constant
 
     def moving_curves(self):
         """The keyed curves that move this object (each with times,
         extrapolate), or None when a glTF or USD file moves it by its own
         animation."""
-        if self.file is not None and not self.file.static:
+        if (self.file is not None and not self.file.static) or (self.instances is not None
+                                                                 and not self.instances.constant):
             return None
         curves = [self.curve, self.translation, self.rotation, self.scale]
         if self.skeleton is not None:
@@ -206,6 +232,14 @@ class SceneObject:
 
     def place(self, t, out):
         """Write the positions at time t into out (n_v, 3) f32."""
+        if self.instances is None:
+            self._place_one(t, out)
+            return
+        self._place_one(t, self._proto)
+        instances_into(self._proto, self.instances.matrices(t), out)
+
+    def _place_one(self, t, out):
+        """The object as written (an instanced object's prototype) at time t into out."""
         if self.curve is not None:
             self.curve.eval_into(t, out)
             return
@@ -269,6 +303,8 @@ class AnimatedScene:
             if obj.file is not None and o.material is None and obj.file.materials:
                 # the file's own materials, per primitive; `material:` overrides them all
                 face_mat = self._file_materials(obj.file, i, default_material)
+                if obj.instances is not None:                 # the prototype's, per copy
+                    face_mat = np.tile(face_mat, obj.instances.n)
                 textured = any(self.materials[m]["texture_index"] >= 0 for m in np.unique(face_mat))
             else:
                 face_mat = np.full(len(obj.faces), mat, np.int32)
@@ -276,8 +312,8 @@ class AnimatedScene:
             any_uv_needed |= textured and obj.uvs is not None
             faces.append(obj.faces + offset)
             mats.append(face_mat)
-            uvs.append((obj.uvs, len(obj.base)))
-            offset += len(obj.base)
+            uvs.append((obj.uvs, obj.n_vertices))
+            offset += obj.n_vertices
             self.objects.append(obj)
         for i, o in enumerate(self.objects):
             for note in (o.usd.notes if o.usd is not None else ()):
@@ -303,7 +339,7 @@ class AnimatedScene:
         self.vertices = np.empty((offset, 3), np.float32)
         for obj in self.objects:                      # static objects: placed once
             if obj.static:
-                obj.place(0.0, self.vertices[obj.offset:obj.offset + len(obj.base)])
+                obj.place(0.0, self.vertices[obj.offset:obj.offset + obj.n_vertices])
         self.moving = [o for o in self.objects if not o.static]
         # rigid movers are placed together (anim/rigid_batch.py), the rest one by one
         rigid = [o for o in self.moving if o.rigid and o.file is None]
@@ -365,6 +401,8 @@ class AnimatedScene:
                 refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
             if o.skeleton:
                 refs.append((f"objects.{i}.skeleton.weights", o.skeleton.weights))
+            if o.instances is not None and o.instances.file:
+                refs.append((f"objects.{i}.instances.file", o.instances.file))
         # what a USD or FBX file brings along (sublayers, references, textures) travels with it
         refs += [(f"objects.{i}.mesh", str(f)) for i, o in enumerate(self.objects) if o.fbx is not None
                  for f in o.fbx.texture_files]
@@ -502,7 +540,7 @@ class AnimatedScene:
             self.rigid_batch.place(t, self.vertices)
         for obj in self.one_by_one:
             if obj not in held:
-                obj.place(t, self.vertices[obj.offset:obj.offset + len(obj.base)])
+                obj.place(t, self.vertices[obj.offset:obj.offset + obj.n_vertices])
         return self.vertices
 
     def camera_at(self, t):

@@ -244,6 +244,30 @@ class Keyframe(Strict):
     mesh: str
 
 
+class InstanceKey(Strict):
+    """One key of an instance table: a row per instance."""
+    t: float
+    translation: List[Vec3]
+    rotation: Optional[List[Tuple[float, float, float, float]]] = None     # w, x, y, z
+    scale: Optional[List[Union[Coord, Vec3]]] = None
+    visible: Optional[List[bool]] = None
+
+
+class Instances(Strict):
+    """Copies of the object, each placed by its own TRS over time (anim/instances.py):
+    `keys` inline, or `file`: an .npz of arrays t (k,), translation (k, n, 3) and
+    optionally rotation (k, n, 4) w x y z, scale (k, n, 3) or (k, n), visible (k, n)."""
+    keys: Optional[Annotated[List[InstanceKey], Field(min_length=1)]] = None
+    file: Optional[str] = None
+    interpolation: Interp = "linear"
+
+    @model_validator(mode="after")
+    def _one_source(self):
+        if (self.keys is None) == (self.file is None):
+            raise ValueError("needs exactly one of 'keys' or 'file'")
+        return self
+
+
 class Object(Strict):
     name: str
     material: Optional[str] = None
@@ -253,6 +277,7 @@ class Object(Strict):
     skeleton: Optional[Skeleton] = None
     animation: Optional[Union[int, str, Annotated[List[Union[int, str]], Field(min_length=1)]]] = None
     prim: Optional[str] = None
+    instances: Optional[Instances] = None
     interpolation: Interp = "linear"
     extrapolate: Literal["clamp", "loop"] = "clamp"
 

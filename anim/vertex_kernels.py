@@ -44,3 +44,17 @@ def transform_into(rest, mat, out):
         out[v, 0] = np.float32(mat[0, 0] * x + mat[0, 1] * y + mat[0, 2] * z + mat[0, 3])
         out[v, 1] = np.float32(mat[1, 0] * x + mat[1, 1] * y + mat[1, 2] * z + mat[1, 3])
         out[v, 2] = np.float32(mat[2, 0] * x + mat[2, 1] * y + mat[2, 2] * z + mat[2, 3])
+
+
+@parallel_arith_kernel
+def instances_into(proto, mats, out):
+    """Copies of a prototype: out[i * m + v] = mats[i] @ (proto[v], 1) for
+    proto (m, 3) f32 and mats (n, 3, 4) f64, out (n * m, 3) f32."""
+    m = proto.shape[0]
+    for j in prange(mats.shape[0] * m):
+        i, v = j // m, j % m
+        x, y, z = np.float64(proto[v, 0]), np.float64(proto[v, 1]), np.float64(proto[v, 2])
+        a = mats[i]
+        out[j, 0] = np.float32(a[0, 0] * x + a[0, 1] * y + a[0, 2] * z + a[0, 3])
+        out[j, 1] = np.float32(a[1, 0] * x + a[1, 1] * y + a[1, 2] * z + a[1, 3])
+        out[j, 2] = np.float32(a[2, 0] * x + a[2, 1] * y + a[2, 2] * z + a[2, 3])

@@ -20,6 +20,7 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.io.polygons import split_at_seams, triangulate
+from anim.io.usd_instancer import PointInstancer, check_cycles
 from anim.materials import DEFAULT_MATERIAL, pbr_material
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -58,6 +59,7 @@ def open_stage(path, scene_path, key):
         raise SceneError(scene_path, key, f"cannot open USD stage {path.name}: {problem[:300]}") from None
     if stage is None:
         raise SceneError(scene_path, key, f"cannot open USD stage {path.name}")
+    check_cycles(stage, pxr, scene_path, key)
     _STAGES[resolved] = (mtime, stage, pxr.UsdSkel.Cache())
     return stage, _STAGES[resolved][2]
 
@@ -213,8 +215,10 @@ class _Mesh:
     def n_vertices(self):
         return self.n_points if self.point_of is None else len(self.point_of)
 
-    def evaluate(self, pxr, time, xform_cache):
-        """World-space points (n_vertices, 3) f64 at a time code."""
+    def evaluate(self, pxr, time, xform_cache, relative_to=None):
+        """World-space points (n_vertices, 3) f64 at a time code; in the
+        space of the prim `relative_to` (an ancestor: a point instancer's
+        prototype root) when given."""
         points = self.points_attr.Get(time)
         if self.skinning is not None:
             skel_query, skin_query = self.skinning
@@ -231,6 +235,8 @@ class _Mesh:
             skin_query.ComputeSkinnedPoints(xforms, points, time)
             # skinned points are in the skeleton's space
             world = _matrix(xform_cache.GetLocalToWorldTransform(skel_query.GetSkeleton().GetPrim()))
+        elif relative_to is not None:
+            world = _matrix(xform_cache.ComputeRelativeTransform(self.prim, relative_to)[0])
         else:
             world = _matrix(xform_cache.GetLocalToWorldTransform(self.prim))
         pts = _apply(np.asarray(points, np.float64), world)
@@ -374,18 +380,15 @@ def _skinning_targets(stage, cache, pxr):
 
 
 def mesh_prims(stage, root, scene_path, key):
-    """Every UsdGeomMesh under root (visible, not a guide or proxy); instancing refused."""
+    """Every UsdGeomMesh under root (visible, not a guide or proxy), through
+    instanceable prims (their instance proxies: each instance's meshes), and
+    every PointInstancer (whose prototypes beneath it are its own, not
+    rendered in their own right)."""
     pxr = _pxr(scene_path, key)
     UsdGeom = pxr.UsdGeom
     found = []
-    it = iter(pxr.Usd.PrimRange(root))
+    it = iter(pxr.Usd.PrimRange(root, pxr.Usd.TraverseInstanceProxies(pxr.Usd.PrimDefaultPredicate)))
     for prim in it:
-        if prim.IsInstance():
-            raise SceneError(scene_path, key, f"{prim.GetPath()} is instanceable (a USD instance); "
-                                              "instanced prims are not rendered yet")
-        if prim.IsA(UsdGeom.PointInstancer):
-            raise SceneError(scene_path, key, f"{prim.GetPath()} is a PointInstancer; point instancers are "
-                                              "not rendered")
         if prim.IsA(UsdGeom.Imageable):
             img = UsdGeom.Imageable(prim)
             # hidden for good (not by time samples: those meshes hide per frame, _Mesh.hides)
@@ -395,7 +398,10 @@ def mesh_prims(stage, root, scene_path, key):
             if hidden or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
                 it.PruneChildren()
                 continue
-        if prim.IsA(UsdGeom.Mesh):
+        if prim.IsA(UsdGeom.PointInstancer):
+            found.append(prim)
+            it.PruneChildren()
+        elif prim.IsA(UsdGeom.Mesh):
             found.append(prim)
     return found
 
@@ -420,10 +426,17 @@ class UsdObject:
             raise SceneError(scene_path, key, f"{self.path.name}: no mesh under {where}")
         skinned = _skinning_targets(self.stage, cache, pxr)
         self.tcps = self.stage.GetTimeCodesPerSecond() or 24.0
-        self.meshes = [_Mesh(p, skinned.get(str(p.GetPath())), scene_path, key) for p in prims]
+        def mesh_of(prim):
+            return _Mesh(prim, skinned.get(str(prim.GetPath())), scene_path, key)
+
+        def meshes_under(proto_root):
+            return mesh_prims(self.stage, proto_root, scene_path, key)
+
+        self.meshes = [PointInstancer(p, pxr, meshes_under, mesh_of, scene_path, key)
+                       if p.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(p) for p in prims]
         self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
-        self.subdivided = [m.path for m in self.meshes
+        self.subdivided = [m.path for m in self.meshes for m in [b[0] for b in getattr(m, "blocks", ())] or [m]
                            if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
         offsets = np.cumsum([0] + [m.n_vertices for m in self.meshes])
         self.offsets = offsets

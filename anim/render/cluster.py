@@ -69,6 +69,8 @@ def referenced_files(scene) -> list:
             refs.append((f"objects.{i}.keyframes.{j}.mesh", k.mesh))
         if o.skeleton:
             refs.append((f"objects.{i}.skeleton.weights", o.skeleton.weights))
+        if o.instances is not None and o.instances.file:
+            refs.append((f"objects.{i}.instances.file", o.instances.file))
     seen, out = set(), []
     for key, ref in refs:
         if ref not in seen:

@@ -1,0 +1,145 @@
+"""Instance tables: copies of one object (the prototype, with whatever
+motion it has of its own), each placed by its own translation, rotation
+(w, x, y, z, slerped along the shortest arc) and scale over time, and
+shown or hidden per key (a hidden copy collapses to a point: none of its
+triangles can be hit).
+
+A copy's vertex is T + R (S * v) of the prototype's vertex v at the same
+time, as a TRS transform places an object. The copies are laid out one
+after another (copy i's vertices at i * n_v): the frame's triangles are the
+prototype's, repeated."""
+from pathlib import Path
+
+import numpy as np
+
+from anim.errors import SceneError
+from anim.interpolate import Curve, locate
+from anim.tracks import FLOAT32_LIMIT, check_times
+
+
+def _slerp(q0, q1, u):
+    """Shortest-arc slerp of unit quaternions q0, q1 (n, 4) at u in [0, 1]."""
+    d = np.sum(q0 * q1, axis=1)
+    q1 = np.where(d[:, None] < 0, -q1, q1)
+    d = np.abs(d)
+    ang = np.arccos(np.minimum(d, 1.0))
+    near = d > 1.0 - 1e-10                               # nearly equal: normalised lerp
+    sin = np.where(near, 1.0, np.sin(ang))
+    w0 = np.where(near, 1.0 - u, np.sin((1.0 - u) * ang) / sin)
+    w1 = np.where(near, u, np.sin(u * ang) / sin)
+    q = w0[:, None] * q0 + w1[:, None] * q1
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def quaternion_matrices(q):
+    """(n, 3, 3) rotations of unit quaternions q (n, 4) w, x, y, z."""
+    w, x, y, z = q.T
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+class InstanceTable:
+    """n copies' TRS keys; `matrices(t)` gives their (n, 3, 4) transforms."""
+
+    def __init__(self, spec, base, scene_path, key, owner, extrapolate):
+        self.scene_path, self.key = scene_path, key
+        arrays = self._read(spec, base, scene_path, key)
+        times = check_times(arrays["t"], scene_path, f"{key}.keys" if spec.keys else f"{key}.file", owner)
+        k = len(times)
+        tr = arrays["translation"]
+        if tr.ndim != 3 or tr.shape[0] != k or tr.shape[2] != 3:
+            self._fail(f"translation has shape {tr.shape}; expected ({k}, n, 3)")
+        n = tr.shape[1]
+        if n == 0:
+            self._fail("no instances")
+        rot = arrays.get("rotation")
+        rot = np.broadcast_to([1.0, 0.0, 0.0, 0.0], (k, n, 4)) if rot is None else rot
+        scale = arrays.get("scale")
+        scale = np.ones((k, n, 3)) if scale is None else scale
+        if scale.ndim == 2 and scale.shape == (k, n):
+            scale = np.repeat(scale[:, :, None], 3, axis=2)
+        visible = arrays.get("visible")
+        visible = np.ones((k, n), bool) if visible is None else visible
+        for name, a, shape in (("rotation", rot, (k, n, 4)), ("scale", scale, (k, n, 3)),
+                               ("visible", visible, (k, n))):
+            if a.shape != shape:
+                self._fail(f"{name} has shape {a.shape}; expected {shape} (a row per instance and key, "
+                           f"as translation's {n} instances and {k} keys)")
+        for name, a in (("translation", tr), ("rotation", rot), ("scale", scale)):
+            if not np.all(np.isfinite(a)):
+                bad = np.argwhere(~np.isfinite(a))[0]
+                self._fail(f"{name}: inf or NaN (key {bad[0]}, instance {bad[1]})")
+            if np.abs(a).max() > FLOAT32_LIMIT:
+                self._fail(f"{name}: a value beyond {FLOAT32_LIMIT:g}: frames are computed in float32")
+        norms = np.linalg.norm(rot, axis=2)
+        if np.any(norms < 1e-12):
+            bad = np.argwhere(norms < 1e-12)[0]
+            self._fail(f"rotation: a zero quaternion (key {bad[0]}, instance {bad[1]})")
+        self.n, self.times, self.extrapolate = n, times, extrapolate
+        self.quats = rot / norms[:, :, None]
+        self.visible = np.asarray(visible, bool)
+        self.translation = Curve(times, tr, spec.interpolation, extrapolate)
+        self.scale = Curve(times, scale, spec.interpolation, extrapolate)
+        self.constant = (self.translation.constant and self.scale.constant and
+                         bool(np.all(self.visible == self.visible[0])) and
+                         bool(np.all(np.abs(np.sum(self.quats * self.quats[:1], axis=2)) > 1 - 1e-15)))
+
+    def _fail(self, message):
+        raise SceneError(self.scene_path, self.key, message)
+
+    def _read(self, spec, base, scene_path, key):
+        """{name: float64 array} from the inline keys or the .npz file."""
+        if spec.keys is not None:
+            keys = spec.keys
+            n = len(keys[0].translation)
+            out = {"t": np.array([k.t for k in keys], np.float64)}
+            for name in ("translation", "rotation", "scale", "visible"):
+                rows = [getattr(k, name) for k in keys]
+                if all(r is None for r in rows):
+                    continue
+                for i, r in enumerate(rows):
+                    if r is None or len(r) != n:
+                        raise SceneError(scene_path, f"{key}.keys.{i}.{name}",
+                                         f"{'missing' if r is None else f'{len(r)} rows'}: every key gives "
+                                         f"{name} for each of the {n} instances (key 0's translation has {n})")
+                if name == "scale":
+                    rows = [[s if isinstance(s, (list, tuple)) else (s, s, s) for s in r] for r in rows]
+                out[name] = np.asarray(rows, bool if name == "visible" else np.float64)
+            return out
+        path = Path(base) / spec.file
+        if not path.is_file():
+            raise SceneError(scene_path, f"{key}.file", f"file not found: {path}")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                out = {name: np.asarray(data[name]) for name in data.files}
+        except (OSError, ValueError) as exc:
+            raise SceneError(scene_path, f"{key}.file", f"cannot read {path.name}: {exc}") from None
+        unknown = set(out) - {"t", "translation", "rotation", "scale", "visible"}
+        if unknown or "t" not in out or "translation" not in out:
+            raise SceneError(scene_path, f"{key}.file", f"{path.name} holds {sorted(out)}; expected t, translation "
+                                                        "and optionally rotation, scale, visible")
+        for name in out:
+            if name != "visible":
+                out[name] = np.asarray(out[name], np.float64)
+        out["t"] = out["t"].reshape(-1)
+        return out
+
+    def matrices(self, t):
+        """(n, 3, 4) float64: copy i's T + R (S * v); a hidden copy's collapses to its position."""
+        tr = self.translation(t)
+        scale = self.scale(t)
+        if len(self.times) == 1:
+            q, vis = self.quats[0], self.visible[0]
+        else:
+            t_w, k = locate(self.times, t, self.extrapolate)
+            if t_w >= self.times[-1]:
+                q, vis = self.quats[-1], self.visible[-1]
+            else:                   # visibility holds from the key at or before t
+                u = (t_w - self.times[k]) / (self.times[k + 1] - self.times[k])
+                q, vis = _slerp(self.quats[k], self.quats[k + 1], u), self.visible[k]
+        out = np.empty((self.n, 3, 4))
+        out[:, :, :3] = quaternion_matrices(q) * scale[:, None, :]
+        out[:, :, 3] = tr
+        out[~vis, :, :3] = 0.0
+        return out

@@ -1,0 +1,201 @@
+"""USD PointInstancers as one block of vertices: every prototype mesh,
+copied once per instance that uses its prototype, placed as usd-core
+places it (`ComputeInstanceTransformsAtTime`: positions, orientations,
+scales, the prototype root's own transform as the most local part, and its
+interpolation between time samples), then by the instancer's own
+transform; instances masked by invisibleIds or inactiveIds
+(`ComputeMaskAtTime`) collapse to a point, so none of their triangles can
+be hit.
+
+The copies are made into the frame's triangles (as glTF's shared meshes
+are): memory and build time grow with instances x prototype size.
+
+usd.py hands in how it reads a mesh (`mesh_of`) and finds the meshes under
+a prim (`meshes_under`), so that this module does not import it back."""
+import numpy as np
+
+from anim.errors import SceneError
+
+_INSTANCE_ATTRS = ("protoIndices", "positions", "orientations", "orientationsf", "scales", "invisibleIds",
+                   "inactiveIds", "velocities", "angularVelocities", "accelerations")
+
+
+def _matrix(m):
+    return np.array(m, np.float64).reshape(-1, 4, 4)
+
+
+class PointInstancer:
+    """One UsdGeomPointInstancer, read as a mesh is by UsdObject: faces,
+    uvs, materials, static, rigid, notes, n_vertices and evaluate()."""
+
+    def __init__(self, prim, pxr, meshes_under, mesh_of, scene_path, key):
+        self.prim, self.path = prim, str(prim.GetPath())
+        self.scene_path, self.key = scene_path, key
+        schema = self.schema = pxr.UsdGeom.PointInstancer(prim)
+        self.notes = []
+        stage = prim.GetStage()
+        targets = schema.GetPrototypesRel().GetTargets()
+        if not targets:
+            self._fail("has no prototypes")
+        roots = []
+        for target in targets:
+            root = stage.GetPrimAtPath(target)
+            if not root:
+                self._fail(f"prototype {target} does not exist")
+            if self.path == str(target) or self.path.startswith(str(target) + "/"):
+                self._fail(f"prototype {target} holds the instancer itself: a cycle of prototypes")
+            roots.append(root)
+        self.proto = self._proto_indices(len(roots))
+        n = len(self.proto)
+        self._check_arrays(n)
+        self.blocks = []          # (mesh, prototype root, instance ids, vertex offset)
+        faces, uvs, per_tri, found, offset = [], [], [], [], 0
+        for p, root in enumerate(roots):
+            ids = np.flatnonzero(self.proto == p)
+            if len(ids) == 0:
+                continue
+            prims = meshes_under(root)
+            if not prims:
+                self._fail(f"prototype {root.GetPath()} has no mesh")
+            for mesh_prim in prims:
+                if mesh_prim.IsA(pxr.UsdGeom.PointInstancer):
+                    self._fail(f"prototype {root.GetPath()} holds point instancer {mesh_prim.GetPath()}: nested "
+                               "point instancers are not supported yet")
+                mesh = mesh_of(mesh_prim)
+                if mesh.skinning is not None:
+                    self._fail(f"prototype mesh {mesh.path} is skinned; skinned prototypes are not supported")
+                nv = mesh.n_vertices
+                self.blocks.append((mesh, root, ids, offset))
+                faces.append((mesh.faces[None] + (offset + np.arange(len(ids)) * nv)[:, None, None]).reshape(-1, 3))
+                if mesh.uvs is not None:
+                    uvs.append((offset, np.tile(mesh.uvs, (len(ids), 1))))
+                tri, mats = mesh.materials
+                local = np.arange(len(mats) + 1) + len(found)
+                local[-1] = -1
+                per_tri.append(np.tile(np.where(tri >= 0, local[tri], -1), len(ids)))
+                found += mats
+                self.notes += mesh.notes
+                offset += nv * len(ids)
+        self.n_vertices = offset
+        if offset >= 2 ** 31:
+            self._fail(f"{n} instances make {offset} vertices, more than 2^31")
+        self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
+        self.uvs = None
+        if uvs:
+            self.uvs = np.zeros((offset, 2), np.float32)
+            for o, u in uvs:
+                self.uvs[o:o + len(u)] = u
+        self.materials = (np.concatenate(per_tri).astype(np.int64), found)
+        self.skinning = None
+        self.hides = any(pxr.UsdGeom.Imageable(p).GetVisibilityAttr().ValueMightBeTimeVarying()
+                         for p in _ancestors(prim))
+        moving_xform = any(pxr.UsdGeom.Xformable(p).TransformMightBeTimeVarying()
+                           for p in _ancestors(prim) if p.IsA(pxr.UsdGeom.Xformable))
+        varying = any(prim.GetAttribute(a).ValueMightBeTimeVarying() for a in _INSTANCE_ATTRS
+                      if prim.GetAttribute(a))
+        self.static = not (moving_xform or varying or self.hides) and all(b[0].static for b in self.blocks)
+        self.rigid = False
+        self.n_instances = n
+
+    def _fail(self, problem):
+        raise SceneError(self.scene_path, self.key, f"point instancer {self.path}: {problem}")
+
+    def _proto_indices(self, n_protos):
+        """protoIndices, the same at every time sample (instances that change
+        in number or prototype over time are refused)."""
+        attr = self.schema.GetProtoIndicesAttr()
+        first = attr.Get(self.prim.GetStage().GetStartTimeCode()) if attr.GetNumTimeSamples() else attr.Get()
+        if first is None or len(first) == 0:
+            self._fail("has no protoIndices (no instances)")
+        first = np.asarray(first, np.int64)
+        for t in attr.GetTimeSamples():
+            other = np.asarray(attr.Get(t), np.int64)
+            if other.shape != first.shape or np.any(other != first):
+                self._fail(f"protoIndices change at time code {t:g} ({len(first)} -> {len(other)} instances or "
+                           "another prototype); instances that change over time are not supported")
+        bad = np.flatnonzero((first < 0) | (first >= n_protos))
+        if len(bad):
+            self._fail(f"protoIndices[{bad[0]}] = {first[bad[0]]}: no such prototype (it has {n_protos})")
+        return first
+
+    def _check_arrays(self, n):
+        """positions, orientations and scales: n rows at every sample, finite."""
+        for name in ("positions", "orientations", "orientationsf", "scales"):
+            attr = self.prim.GetAttribute(name)
+            if not attr or not attr.HasAuthoredValue():
+                continue
+            samples = attr.GetTimeSamples() or [None]
+            for t in samples:
+                value = attr.Get() if t is None else attr.Get(t)
+                if value is None:
+                    continue
+                a = np.array([[q.GetReal(), *q.GetImaginary()] for q in value] if name.startswith("orient")
+                             else value, np.float64).reshape(len(value), -1)
+                when = "" if t is None else f" at time code {t:g}"
+                if len(a) != n:
+                    self._fail(f"{name} has {len(a)} entries{when}, protoIndices {n}")
+                if not np.all(np.isfinite(a)):
+                    self._fail(f"{name}[{int(np.argwhere(~np.isfinite(a))[0, 0])}] is inf or NaN{when}")
+        if not self.prim.GetAttribute("positions") or not self.prim.GetAttribute("positions").HasAuthoredValue():
+            self._fail("has no positions")
+
+    def evaluate(self, pxr, time, xform_cache):
+        """World-space points (n_vertices, 3) f64 at a time code."""
+        PI = pxr.UsdGeom.PointInstancer
+        xf = _matrix(self.schema.ComputeInstanceTransformsAtTime(time, time, PI.IncludeProtoXform, PI.IgnoreMask))
+        if len(xf) != self.n_instances:
+            self._fail(f"usd-core computed {len(xf)} instance transforms at time code {time.GetValue():g}, "
+                       f"not {self.n_instances}: check positions, orientations and scales")
+        world = xf @ _matrix(xform_cache.GetLocalToWorldTransform(self.prim))[0]
+        if not np.all(np.isfinite(world)):
+            self._fail(f"an instance transform is inf or NaN at time code {time.GetValue():g}")
+        mask = self.schema.ComputeMaskAtTime(time)
+        shown = np.ones(self.n_instances, bool) if len(mask) == 0 else np.asarray(mask, bool)
+        if self.hides and pxr.UsdGeom.Imageable(self.prim).ComputeVisibility(time) == pxr.UsdGeom.Tokens.invisible:
+            shown[:] = False
+        out = np.empty((self.n_vertices, 3), np.float64)
+        for mesh, root, ids, offset in self.blocks:
+            local = mesh.evaluate(pxr, time, xform_cache, relative_to=root)
+            m = world[ids]
+            pts = np.einsum("vj,kji->kvi", local, m[:, :3, :3]) + m[:, None, 3, :3]
+            hidden = ~shown[ids]
+            pts[hidden] = m[hidden, None, 3, :3]             # a hidden copy collapses to its position
+            out[offset:offset + pts.shape[0] * pts.shape[1]] = pts.reshape(-1, 3)
+        return out
+
+
+def check_cycles(stage, pxr, scene_path, key):
+    """SceneError naming a cycle of point instancers (a prototype that holds
+    its own instancer, directly or through other instancers' prototypes),
+    before anything in usd-core recurses through it (its bounds computation
+    overflows the stack on one)."""
+    flags = pxr.Usd.TraverseInstanceProxies(pxr.Usd.PrimDefaultPredicate)
+    instancers = {str(p.GetPath()): p for p in stage.Traverse(flags) if p.IsA(pxr.UsdGeom.PointInstancer)}
+    edges = {}
+    for path, prim in instancers.items():
+        targets = [str(t) for t in pxr.UsdGeom.PointInstancer(prim).GetPrototypesRel().GetTargets()]
+        edges[path] = [(t, other) for t in targets for other in instancers
+                       if other == t or other.startswith(t.rstrip("/") + "/")]
+    state = {}
+
+    def visit(path, trail):
+        state[path] = "open"
+        for target, other in edges[path]:
+            if state.get(other) == "open":
+                loop = trail[trail.index(other):] + [other] if other in trail else [path, other]
+                raise SceneError(scene_path, key, f"point instancer {path}: prototype {target} holds "
+                                                  f"{'the instancer itself' if other == path else other}: a cycle "
+                                                  f"of prototypes ({' -> '.join(loop)})")
+            if other not in state:
+                visit(other, trail + [other])
+        state[path] = "done"
+
+    for path in instancers:
+        if path not in state:
+            visit(path, [path])
+
+
+def _ancestors(prim):
+    while prim and not prim.IsPseudoRoot():
+        yield prim
+        prim = prim.GetParent()

@@ -1,0 +1,168 @@
+"""Instance tables (`instances:`, anim/instances.py): copies of an object
+placed by their own TRS keys, against the same copies written as one
+object each with translation, rotation and scale tracks (the TRS path of
+anim/tracks.py, not the instance code); hidden copies collapse; the
+prototype's own motion and materials come along; bad tables are one line
+and exit 2."""
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.main import main
+
+N, K = 9, 4
+TIMES = [0.0, 0.3, 0.5, 1.0]
+
+
+def _data(seed=5):
+    rng = np.random.default_rng(seed)
+    tr = rng.uniform(-3, 3, (K, N, 3))
+    q = rng.normal(size=(K, N, 4))
+    q /= np.linalg.norm(q, axis=2, keepdims=True)
+    scale = rng.uniform(0.5, 1.5, (K, N, 3))
+    return tr, q, scale
+
+
+def _box(tmp_path):
+    (tmp_path / "box.obj").write_text(
+        "v -0.5 -0.5 -0.5\nv 0.5 -0.5 -0.5\nv 0.5 0.5 -0.5\nv -0.5 0.5 -0.5\n"
+        "v -0.5 -0.5 0.5\nv 0.5 -0.5 0.5\nv 0.5 0.5 0.5\nv -0.5 0.5 0.5\n"
+        "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n")
+
+
+HEAD = """version: 1
+frames: {start: 0, end: 24, fps: 24}
+output: {path: out/f_##.exr, resolution: [48, 48]}
+camera: {eye: [0, 2, 12], look_at: [0, 0, 0], fov: 50}
+lights: [{position: [3, 6, 4], intensity: 40}]
+objects:
+"""
+OWN = "    transform: {rotation: {keys: [[0, 1, 0, 0, 0], [1, 0, 0, 1, 0]]}}\n"
+
+
+def _rows(a):
+    return "[" + ", ".join("[" + ", ".join(repr(float(x)) for x in row) + "]" for row in a) + "]"
+
+
+def _instanced(tmp_path, tr, q, scale, extrapolate="clamp", inline=False, own=True):
+    if inline:
+        keys = "".join(f"        - {{t: {t}, translation: {_rows(tr[k])}, rotation: {_rows(q[k])}, "
+                       f"scale: {_rows(scale[k])}}}\n" for k, t in enumerate(TIMES))
+        inst = f"    instances:\n      interpolation: catmull-rom\n      keys:\n{keys}"
+    else:
+        np.savez(tmp_path / "field.npz", t=np.array(TIMES), translation=tr, rotation=q, scale=scale)
+        inst = "    instances: {file: field.npz, interpolation: catmull-rom}\n"
+    path = tmp_path / "inst.yaml"
+    path.write_text(HEAD + f"  - name: boxes\n    mesh: box.obj\n    extrapolate: {extrapolate}\n"
+                    + (OWN if own else "") + inst)
+    return path
+
+
+def _one_by_one(tmp_path, tr, q, scale, extrapolate="clamp"):
+    """Copy i as its own object with TRS tracks (the keys of instance i)."""
+    objects = ""
+    for i in range(N):
+        t_rows = [[float(t), *map(float, tr[k, i])] for k, t in enumerate(TIMES)]
+        q_rows = [[float(t), *map(float, q[k, i])] for k, t in enumerate(TIMES)]
+        s_rows = [[float(t), *map(float, scale[k, i])] for k, t in enumerate(TIMES)]
+        objects += (f"  - name: c{i}\n    mesh: box.obj\n    extrapolate: {extrapolate}\n    transform:\n"
+                    f"      translation: {{interpolation: catmull-rom, keys: {t_rows}}}\n"
+                    f"      rotation: {{keys: {q_rows}}}\n"
+                    f"      scale: {{interpolation: catmull-rom, keys: {s_rows}}}\n")
+    path = tmp_path / "flat.yaml"
+    path.write_text(HEAD + objects)
+    return path
+
+
+@pytest.mark.parametrize("extrapolate, inline", [("clamp", False), ("loop", True)])
+def test_copies_are_placed_as_trs_tracks_place_objects(tmp_path, extrapolate, inline):
+    """A still prototype: copy i equals object i of the same keys as TRS
+    tracks, at key times, between them and past them (clamped or looped)."""
+    from anim.scene import AnimatedScene
+    _box(tmp_path)
+    tr, q, scale = _data()
+    inst = AnimatedScene(_instanced(tmp_path, tr, q, scale, extrapolate, inline, own=False))
+    flat = AnimatedScene(_one_by_one(tmp_path, tr, q, scale, extrapolate))
+    for t in (0.0, 0.13, 0.3, 0.42, 0.77, 1.0, 1.6):
+        np.testing.assert_allclose(inst.vertices_at(t), flat.vertices_at(t), atol=1e-5)
+
+
+def test_a_moving_prototype_is_placed_by_each_copy(tmp_path):
+    """The prototype's own motion first, then the copy's T + R (S * p): at
+    key times the copy's map is its keys exactly."""
+    from anim.scene import AnimatedScene
+    from anim.instances import quaternion_matrices
+    _box(tmp_path)
+    tr, q, scale = _data()
+    scene = AnimatedScene(_instanced(tmp_path, tr, q, scale))
+    obj = scene.objects[0]
+    for k, t in enumerate(TIMES):
+        own = np.empty((8, 3), np.float32)
+        obj._place_one(t, own)                       # the box turning on its own track
+        want = np.einsum("nij,nvj->nvi", quaternion_matrices(q[k]), own[None] * scale[k][:, None]) + tr[k][:, None]
+        np.testing.assert_allclose(scene.vertices_at(t).reshape(N, 8, 3), want, atol=2e-6)
+    assert not np.allclose(scene.vertices_at(0.0).reshape(N, 8, 3)[0] - tr[0, 0],
+                           scene.vertices_at(1.0).reshape(N, 8, 3)[0] - tr[-1, 0])
+
+
+def test_a_hidden_copy_collapses_and_the_table_must_fit(tmp_path):
+    from anim.scene import AnimatedScene
+    _box(tmp_path)
+    tr, q, scale = _data()
+    visible = np.ones((K, N), bool)
+    visible[1, 4] = False
+    np.savez(tmp_path / "field.npz", t=np.array(TIMES), translation=tr, rotation=q, scale=scale, visible=visible)
+    path = tmp_path / "v.yaml"
+    path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances: {file: field.npz}\n")
+    scene = AnimatedScene(path)
+    assert len(scene.faces) == N * 12
+    v = scene.vertices_at(0.4).reshape(N, 8, 3)          # key 1 holds until key 2 (t = 0.5)
+    assert np.all(v[4] == v[4][0]) and not np.all(v[3] == v[3][0])
+    v = scene.vertices_at(0.5).reshape(N, 8, 3)
+    assert not np.all(v[4] == v[4][0])
+
+
+@pytest.mark.parametrize("table, words", [
+    ("visible=np.ones((4, 8), bool)", "visible has shape (4, 8); expected (4, 9)"),
+    ("scale=np.ones((4, 9, 2))", "scale has shape (4, 9, 2)"),
+    ("translation=nan", "translation: inf or NaN (key 2, instance 5)"),
+    ("rotation=zero", "rotation: a zero quaternion (key 0, instance 1)"),
+    ("t=np.array([0.0, 0.5, 0.5, 1.0])", "key times must increase"),
+    ("extra=np.ones(3)", "expected t, translation"),
+])
+def test_a_bad_instance_table_is_one_line_and_exit_2(tmp_path, table, words):
+    _box(tmp_path)
+    tr, q, scale = _data()
+    arrays = {"t": np.array(TIMES), "translation": tr, "rotation": q, "scale": scale}
+    name, expr = table.split("=", 1)
+    if expr == "nan":
+        tr = tr.copy()
+        tr[2, 5, 1] = np.nan
+        arrays["translation"] = tr
+    elif expr == "zero":
+        q = q.copy()
+        q[0, 1] = 0
+        arrays["rotation"] = q
+    else:
+        arrays[name] = eval(expr)
+    np.savez(tmp_path / "field.npz", **arrays)
+    path = tmp_path / "bad.yaml"
+    path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances: {file: field.npz}\n")
+    for command in (["check", str(path)], ["render", str(path), "-q"]):
+        res = CliRunner().invoke(main, command)
+        assert res.exit_code == 2 and words in res.output and "objects.0.instances" in res.output, res.output
+        assert len(res.output.strip().splitlines()) == 1
+
+
+def test_inline_rows_must_cover_every_instance(tmp_path):
+    _box(tmp_path)
+    path = tmp_path / "rows.yaml"
+    path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances:\n      keys:\n"
+                           "        - {t: 0, translation: [[0, 0, 0], [1, 0, 0]]}\n"
+                           "        - {t: 1, translation: [[0, 0, 0], [1, 0, 0]], scale: [1, 2]}\n")
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "objects.0.instances.keys.0.scale" in res.output, res.output
+    path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances: {keys: [{t: 0, translation: "
+                           "[[0, 0, 0]]}], file: x.npz}\n")
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "exactly one of 'keys' or 'file'" in res.output, res.output

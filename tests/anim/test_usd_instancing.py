@@ -1,0 +1,217 @@
+"""USD instancing (anim/io/usd_instancer.py, usd.mesh_prims): a
+PointInstancer and instanceable prims render with the depth of the same
+world written without instancing (each copy an Xform with translate,
+orient and scale ops time-sampled as the instancer's positions,
+orientations and scales, over a reference to the prototype: usd-core's
+XformCache composes those, not the PointInstancer code), while instances
+move, turn, scale, and the instancer itself moves; invisibleIds hide a
+copy. Bad instancers are one line and exit 2."""
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from cli.main import main
+from raycore.images.image_io import read_exr
+
+pytest.importorskip("pxr")
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
+
+from tests.usd_files import mesh, new_stage, tube  # noqa: E402
+
+N = 14
+HIDDEN = 3
+
+
+def _camera(stage):
+    cam = UsdGeom.Camera.Define(stage, "/Cam")
+    cam.AddTranslateOp().Set(Gf.Vec3d(0, 0, 13))
+    cam.GetFocalLengthAttr().Set(18.0)
+
+
+def _prototypes(stage, root):
+    """Two prototypes under root: a tube with its own transform, and an
+    Xform holding a turned, shifted tube (a mesh below its prototype root)."""
+    pts, counts, idx = tube(n_around=8, n_along=3, length=2.4, radius=0.6)
+    a = mesh(stage, f"{root}/Tube", pts, counts, idx)
+    UsdGeom.Xformable(a).AddTranslateOp().Set(Gf.Vec3d(-0.8, 0, 0.2))
+    pair = UsdGeom.Xform.Define(stage, f"{root}/Pair")
+    pair.AddScaleOp().Set(Gf.Vec3f(0.7, 0.7, 0.7))
+    b = mesh(stage, f"{root}/Pair/M", pts * np.float32([1.0, 2.0, 2.0]), counts, idx)
+    xf = UsdGeom.Xformable(b)
+    xf.AddTranslateOp().Set(Gf.Vec3d(0, 0.5, 0))
+    xf.AddRotateZOp().Set(50.0)
+    return [f"{root}/Tube", f"{root}/Pair"]
+
+
+def _instance_data(seed=3):
+    rng = np.random.default_rng(seed)
+    proto = rng.integers(0, 2, N)
+    pos = {t: rng.uniform(-6, 6, (N, 3)) * [1, 1, 0.2] for t in (0, 10)}
+    q = {t: rng.normal(size=(N, 4)) for t in (0, 10)}
+    q = {t: v / np.linalg.norm(v, axis=1, keepdims=True) for t, v in q.items()}
+    scale = {t: rng.uniform(0.6, 1.4, (N, 3)) for t in (0, 10)}
+    return proto, pos, q, scale
+
+
+def _instancer_ops(xf):
+    xf.AddTranslateOp().Set(Gf.Vec3d(0.5, -0.3, 0), 0)
+    op = xf.AddRotateZOp()
+    op.Set(0.0, 0)
+    op.Set(30.0, 10)
+
+
+def _instanced_stage(path, data):
+    proto, pos, q, scale = data
+    stage = new_stage(path)
+    _camera(stage)
+    pi = UsdGeom.PointInstancer.Define(stage, "/World/PI")
+    _instancer_ops(pi)
+    pi.GetPrototypesRel().SetTargets([Sdf.Path(p) for p in _prototypes(stage, "/World/PI/Protos")])
+    pi.GetProtoIndicesAttr().Set(Vt.IntArray(proto.tolist()))
+    for t in (0, 10):
+        pi.GetPositionsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*p) for p in pos[t]]), t)
+        # float quaternions (half ones are not unit length to 1e-3, which usd-core's two paths treat apart)
+        pi.GetOrientationsfAttr().Set(Vt.QuatfArray([Gf.Quatf(*v) for v in q[t]]), t)
+        pi.GetScalesAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*s) for s in scale[t]]), t)
+    pi.GetInvisibleIdsAttr().Set(Vt.Int64Array([HIDDEN]))
+    stage.GetRootLayer().Save()
+
+
+def _flat_stage(path, data):
+    """The same world without instancing: an Xform per visible copy."""
+    proto, pos, q, scale = data
+    stage = new_stage(path)
+    _camera(stage)
+    protos = _prototypes(stage, "/Protos")
+    stage.GetPrimAtPath("/Protos").SetSpecifier(Sdf.SpecifierClass)       # not rendered in its own right
+    world = UsdGeom.Xform.Define(stage, "/World")
+    _instancer_ops(world)
+    for i in range(N):
+        if i == HIDDEN:
+            continue
+        copy = UsdGeom.Xform.Define(stage, f"/World/I{i}")
+        tr, orient, sc = copy.AddTranslateOp(), copy.AddOrientOp(UsdGeom.XformOp.PrecisionFloat), copy.AddScaleOp()
+        for t in (0, 10):
+            tr.Set(Gf.Vec3d(*pos[t][i]), t)
+            orient.Set(Gf.Quatf(*q[t][i]), t)
+            sc.Set(Gf.Vec3f(*scale[t][i]), t)
+        name = protos[proto[i]].rsplit("/", 1)[1]
+        stage.DefinePrim(f"/World/I{i}/{name}").GetReferences().AddInternalReference(protos[proto[i]])
+    stage.GetRootLayer().Save()
+
+
+def _depth(path, out, frames="0:10"):
+    res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "-q", "--no-shadows", "--res", "96x96",
+                                    "--frames", frames])
+    assert res.exit_code == 0, res.output
+    depth = []
+    for f in sorted(out.glob("*.exr")):
+        names, pix, _ = read_exr(str(f))
+        depth.append(pix[..., names.index("Z")])
+    return np.array(depth)
+
+
+def _same(a, b, hits=0.05):
+    both = np.isfinite(a) & np.isfinite(b)
+    same = (np.isinf(a) & np.isinf(b)) | (both & (np.abs(np.where(both, a, 0) - np.where(both, b, 0)) <= 1e-4 * np.abs(np.where(both, b, 1))))
+    assert np.isfinite(b).mean() > hits
+    assert same.mean() >= 0.999, same.mean()
+
+
+def test_a_point_instancer_has_the_depth_of_its_flattened_world(tmp_path):
+    data = _instance_data()
+    _instanced_stage(tmp_path / "pi.usda", data)
+    _flat_stage(tmp_path / "flat.usda", data)
+    got, want = _depth(tmp_path / "pi.usda", tmp_path / "a"), _depth(tmp_path / "flat.usda", tmp_path / "b")
+    assert len(got) == 11
+    _same(got, want)
+    assert not np.array_equal(np.isfinite(got[0]), np.isfinite(got[10]))       # they move
+
+
+def test_a_hidden_instance_is_not_rendered_and_the_copies_are_counted(tmp_path):
+    from anim.scene import AnimatedScene
+    data = _instance_data()
+    _instanced_stage(tmp_path / "pi.usda", data)
+    scene = AnimatedScene(tmp_path / "pi.usda")
+    (obj,) = [o for o in scene.objects if o.name == "/World/PI"]
+    tube_tris = 2 * 8 * 2
+    assert len(obj.faces) == N * tube_tris
+    # unhiding the copy changes the picture
+    stage = Usd.Stage.Open(str(tmp_path / "pi.usda"))
+    UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/PI")).GetInvisibleIdsAttr().Set(Vt.Int64Array([]))
+    stage.Save()
+    flat = tmp_path / "flat.usda"
+    _flat_stage(flat, data)
+    shown, hidden = _depth(tmp_path / "pi.usda", tmp_path / "a", "0:0"), _depth(flat, tmp_path / "b", "0:0")
+    assert np.mean(np.isfinite(shown) != np.isfinite(hidden)) > 0.001
+
+
+def test_instanceable_prims_render_as_their_copies(tmp_path):
+    """Two instanceable references to one prototype (instance proxies)
+    render as the same references made without instancing."""
+    out = []
+    for instanceable in (True, False):
+        path = tmp_path / f"i{instanceable}.usda"
+        stage = new_stage(path)
+        _camera(stage)
+        _prototypes(stage, "/Proto")
+        stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
+        for k, x in enumerate((-3.0, 2.5)):
+            copy = UsdGeom.Xform.Define(stage, f"/World/C{k}")
+            copy.AddTranslateOp().Set(Gf.Vec3d(x, 1.0 * k, 0))
+            copy.AddRotateZOp().Set(40.0 * k)
+            copy.GetPrim().GetReferences().AddInternalReference("/Proto")
+            copy.GetPrim().SetInstanceable(instanceable)
+        stage.GetRootLayer().Save()
+        out.append(_depth(path, tmp_path / f"o{instanceable}", "0:0"))
+    _same(out[0], out[1], hits=0.01)
+
+
+@pytest.mark.parametrize("damage, words", [
+    ("index", "protoIndices[2] = 5: no such prototype"),
+    ("nan", "positions[1] is inf or NaN"),
+    ("empty", "has no mesh"),
+    ("cycle", "a cycle of prototypes"),
+    ("cycle2", "a cycle of prototypes (/World/PI -> /Other/PI2 -> /World/PI)"),
+    ("length", "positions has 13 entries"),
+    ("changing", "protoIndices change"),
+])
+def test_a_bad_point_instancer_is_one_line_and_exit_2(tmp_path, damage, words):
+    data = _instance_data()
+    path = tmp_path / "pi.usda"
+    _instanced_stage(path, data)
+    stage = Usd.Stage.Open(str(path))
+    pi = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/PI"))
+    proto = data[0].tolist()
+    if damage == "index":
+        proto[2] = 5
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray(proto))
+    elif damage == "nan":
+        pos = [Gf.Vec3f(*p) for p in data[1][0]]
+        pos[1] = Gf.Vec3f(float("nan"), 0, 0)
+        pi.GetPositionsAttr().Set(Vt.Vec3fArray(pos), 0)
+    elif damage == "empty":
+        UsdGeom.Xform.Define(stage, "/World/PI/Protos/Nothing")
+        pi.GetPrototypesRel().AddTarget("/World/PI/Protos/Nothing")
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray([2] + proto[1:]))
+    elif damage == "cycle":
+        pi.GetPrototypesRel().AddTarget("/World")
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray([2] + proto[1:]))
+    elif damage == "cycle2":                  # through a second instancer
+        other = UsdGeom.PointInstancer.Define(stage, "/Other/PI2")
+        other.GetPrototypesRel().SetTargets(["/World"])
+        other.GetProtoIndicesAttr().Set(Vt.IntArray([0]))
+        other.GetPositionsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(0, 0, 0)]))
+        pi.GetPrototypesRel().AddTarget("/Other")
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray([2] + proto[1:]))
+    elif damage == "length":
+        pi.GetPositionsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*p) for p in data[1][10][:-1]]), 10)
+    elif damage == "changing":
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray(proto), 0)
+        pi.GetProtoIndicesAttr().Set(Vt.IntArray(proto[:-1]), 10)
+    stage.Save()
+    for command in ("check", "render"):
+        res = CliRunner().invoke(main, [command, str(path), "-o", str(tmp_path / "o")] if command == "render"
+                                 else [command, str(path)])
+        assert res.exit_code == 2 and words in res.output, res.output
+        assert len(res.output.strip().splitlines()) == 1
