@@ -19,7 +19,7 @@ from anim.errors import SceneError
 from anim.interpolate import wrap_time
 from anim.materials import pbr_material
 from anim.track_kernels import quat_to_matrix, slerp_into
-from anim.vertex_kernels import skin_into, transform_into
+from anim.vertex_kernels import instances_into, skin_into, transform_into
 
 _DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
@@ -252,7 +252,8 @@ class GltfObject:
                 if len(idx) % 3 or (len(idx) and idx.max() >= len(pos)):
                     self._fail(f"mesh {node.mesh} primitive {p_index}: bad triangle indices")
                 uv = self._primitive_uvs(prim, len(pos))
-                inst = {"node": node_index, "offset": offset, "rest": np.ascontiguousarray(pos),
+                copies = self._gpu_instances(node_index, node)
+                inst = {"node": node_index, "offset": offset, "rest": np.ascontiguousarray(pos), "copies": copies,
                         "targets": [self.accessor(t["POSITION"]).astype(np.float32)
                                     for t in (prim.targets or []) if t.get("POSITION") is not None],
                         "mesh": node.mesh, "skin": None}
@@ -272,13 +273,17 @@ class GltfObject:
                         self._fail(f"mesh {node.mesh}: JOINTS_0 index beyond skin {node.skin}'s joints")
                     inst["skin"] = (np.asarray(skin.joints), ibm.astype(np.float64),
                                     np.ascontiguousarray(joint), np.ascontiguousarray(weight, np.float32))
+                if copies is not None and inst["skin"] is not None:
+                    self._fail(f"node {node_index}: a skinned mesh with EXT_mesh_gpu_instancing is not supported")
+                n = 1 if copies is None else len(copies)
                 self.instances.append(inst)
-                verts.append(pos)
-                faces.append(idx.reshape(-1, 3).astype(np.int32) + offset)
-                face_material.append(np.full(len(idx) // 3, -1 if prim.material is None else prim.material,
+                verts.append(np.tile(pos, (n, 1)))
+                tri = idx.reshape(-1, 3).astype(np.int64)
+                faces.append((tri[None] + offset + (np.arange(n) * len(pos))[:, None, None]).reshape(-1, 3))
+                face_material.append(np.full(n * (len(idx) // 3), -1 if prim.material is None else prim.material,
                                              np.int32))
-                uvs.append(uv)
-                offset += len(pos)
+                uvs.append(np.tile(uv, (n, 1)))
+                offset += n * len(pos)
         if not self.instances:
             self._fail("the scene has no triangle meshes")
         self.n_vertices = offset
@@ -289,6 +294,39 @@ class GltfObject:
         self.face_material = np.concatenate(face_material)
         used = sorted({int(m) for m in np.unique(self.face_material) if m >= 0})
         self.materials = {m: self._material(m) for m in used}
+
+    def _gpu_instances(self, index, node):
+        """(n, 4, 4) local transforms of EXT_mesh_gpu_instancing's copies of
+        a node's mesh (TRANSLATION, ROTATION x y z w, SCALE; the node's own
+        transform applies after them), or None."""
+        ext = (node.extensions or {}).get("EXT_mesh_gpu_instancing")
+        if ext is None:
+            return None
+        attrs = ext.get("attributes", {}) if isinstance(ext, dict) else {}
+        got = {name: self.accessor(attrs[name]).astype(np.float64) for name in ("TRANSLATION", "ROTATION", "SCALE")
+               if name in attrs}
+        if not got:
+            self._fail(f"node {index}: EXT_mesh_gpu_instancing without TRANSLATION, ROTATION or SCALE")
+        n = len(next(iter(got.values())))
+        for name, width in (("TRANSLATION", 3), ("ROTATION", 4), ("SCALE", 3)):
+            a = got.get(name)
+            if a is not None and a.shape != (n, width):
+                self._fail(f"node {index}: EXT_mesh_gpu_instancing {name} has shape {a.shape}; expected ({n}, {width})")
+            if a is not None and not np.all(np.isfinite(a)):
+                self._fail(f"node {index}: EXT_mesh_gpu_instancing {name} holds inf or NaN")
+        out = np.tile(np.eye(4), (n, 1, 1))
+        rot = got.get("ROTATION")
+        if rot is not None:
+            norms = np.linalg.norm(rot, axis=1, keepdims=True)
+            if np.any(norms < 1e-12):
+                self._fail(f"node {index}: EXT_mesh_gpu_instancing ROTATION holds a zero quaternion")
+            rot = rot / norms
+        for i in range(n):
+            r = _quat_matrix(rot[i]) if rot is not None else np.eye(3)
+            out[i, :3, :3] = r * (got["SCALE"][i][None, :] if "SCALE" in got else 1.0)
+        if "TRANSLATION" in got:
+            out[:, :3, 3] = got["TRANSLATION"]
+        return out
 
     def _texture_info(self, material_index):
         """The base colour (or, in the older specular-glossiness model, the
@@ -514,5 +552,8 @@ class GltfObject:
                 joints, ibm, joint, weight = inst["skin"]
                 mats = np.einsum("ab,jbc,jcd->jad", top, world[joints], ibm)[:, :3]
                 skin_into(rest, joint, weight, np.ascontiguousarray(mats), dst)
+            elif inst["copies"] is not None:
+                dst = out[inst["offset"]:inst["offset"] + len(rest) * len(inst["copies"])]
+                instances_into(rest, np.ascontiguousarray((top @ world[inst["node"]] @ inst["copies"])[:, :3]), dst)
             else:
                 transform_into(rest, np.ascontiguousarray((top @ world[inst["node"]])[:3]), dst)

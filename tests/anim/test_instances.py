@@ -166,3 +166,39 @@ def test_inline_rows_must_cover_every_instance(tmp_path):
                            "[[0, 0, 0]]}], file: x.npz}\n")
     res = CliRunner().invoke(main, ["check", str(path)])
     assert res.exit_code == 2 and "exactly one of 'keys' or 'file'" in res.output, res.output
+
+
+def test_gltf_gpu_instancing_places_each_copy_under_its_node(tmp_path):
+    """EXT_mesh_gpu_instancing: copy i is node_world @ T_i R_i S_i (scipy's
+    rotation of the x y z w quaternion as the oracle), the node moving by
+    its own animation; a NaN among the copies is one line and exit 2."""
+    from scipy.spatial.transform import Rotation
+    from anim.scene import AnimatedScene
+    from tests.gltf_files import GltfBuilder
+    rng = np.random.default_rng(2)
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    n = 6
+    tr, q, sc = rng.uniform(-2, 2, (n, 3)), rng.normal(size=(n, 4)), rng.uniform(0.5, 2, (n, 3))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    b = GltfBuilder()
+    mesh = b.mesh(pos, np.array([0, 1, 2]))
+    attrs = {"TRANSLATION": b.accessor(tr), "ROTATION": b.accessor(q), "SCALE": b.accessor(sc)}
+    node = b.node(mesh=mesh, extensions={"EXT_mesh_gpu_instancing": {"attributes": attrs}})
+    b.animation([(node, "translation", np.array([0.0, 1.0]), np.array([[0, 0, 0], [0, 0, 4.0]]), "LINEAR")])
+    b.doc.extensionsUsed = ["EXT_mesh_gpu_instancing"]
+    b.save(tmp_path / "copies.glb", [node])
+    path = tmp_path / "g.yaml"
+    path.write_text(HEAD + "  - name: copies\n    mesh: copies.glb\n")
+    scene = AnimatedScene(path)
+    assert len(scene.faces) == n
+    for t in (0.0, 0.5):
+        want = np.einsum("nij,nvj->nvi", Rotation.from_quat(q).as_matrix(), pos[None] * sc[:, None])
+        want += tr[:, None] + [0, 0, 4 * t]
+        np.testing.assert_allclose(scene.vertices_at(t).reshape(n, 3, 3), want, atol=1e-5)
+    q[3, 1] = np.nan
+    b2 = GltfBuilder()
+    mesh = b2.mesh(pos, np.array([0, 1, 2]))
+    node = b2.node(mesh=mesh, extensions={"EXT_mesh_gpu_instancing": {"attributes": {"ROTATION": b2.accessor(q)}}})
+    b2.save(tmp_path / "copies.glb", [node])
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "ROTATION holds inf or NaN" in res.output, res.output
