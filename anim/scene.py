@@ -16,6 +16,7 @@ from pydantic import ValidationError
 from anim.area_lights import emitter_positions
 from anim.errors import SceneError
 from anim.instances import InstanceTable
+from anim.keyframes import KeyStore, LinearKeys
 from anim.interpolate import Curve
 from anim.materials import DEFAULT_MATERIAL
 from anim.io.mesh_io import load_mesh, vertex_lines
@@ -122,29 +123,7 @@ class SceneObject:
         self.curve = self.skeleton = self.gltf = self.usd = self.fbx = None
         self.translation = self.rotation = self.scale = None
         if spec.keyframes is not None:
-            times = check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes", owner)
-            meshes = [load_mesh(base / k.mesh, scene_path, f"{key}.keyframes.{i}.mesh")
-                      for i, k in enumerate(spec.keyframes)]
-            v0, self.faces, self.uvs = meshes[0]
-            written = [vertex_lines(base / k.mesh) if k.mesh.lower().endswith(".obj") else None
-                       for k in spec.keyframes]
-            for i in range(1, len(written)):
-                if written[i] != written[0] and None not in (written[i], written[0]):
-                    raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",
-                                     f"{spec.keyframes[i].mesh} writes {written[i]} vertices, keyframe 0 "
-                                     f"({spec.keyframes[0].mesh}) {written[0]}: the files' vertex lists "
-                                     "must correspond line by line")
-            for i, (v, f, _) in enumerate(meshes[1:], start=1):
-                if v.shape != v0.shape or not np.array_equal(f, self.faces):
-                    raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",
-                                     f"has {len(v)} vertices / {len(f)} faces, keyframe 0 has "
-                                     f"{len(v0)} / {len(self.faces)} (or different faces)")
-            self.base = v0
-            if len(meshes) > 1:
-                stack = np.stack([m[0] for m in meshes])
-                self.curve = Curve(times, stack, spec.interpolation, spec.extrapolate)
-                if self.curve.constant:
-                    self.curve = None
+            self._keyframes(spec, base, scene_path, key, owner)
         elif spec.mesh.lower().endswith((".gltf", ".glb")):
             from anim.io.gltf import GltfObject          # pygltflib only for scenes with glTF files
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
@@ -205,6 +184,43 @@ class SceneObject:
         self._proto = np.empty((nv, 3), np.float32)
         self.rigid = False
         self.static = self.static and table.constant
+
+    def _keyframes(self, spec, base, scene_path, key, owner):
+        """Vertex keyframes, read one file at a time and checked against the
+        first (vertex count, faces, an OBJ's vertex lines); kept as float32
+        keys (anim/keyframes.py) for linear interpolation, as a Curve of
+        per-segment coefficients for the smooth methods."""
+        times = check_times([k.t for k in spec.keyframes], scene_path, f"{key}.keyframes", owner)
+        linear = spec.interpolation == "linear" or (len(times) == 2 and
+                                                    spec.interpolation not in ("clamped", "centripetal"))
+        store = KeyStore() if linear else None
+        stack, written0, constant = [], None, True
+        for i, k in enumerate(spec.keyframes):
+            v, f, uv = load_mesh(base / k.mesh, scene_path, f"{key}.keyframes.{i}.mesh")
+            written = vertex_lines(base / k.mesh) if k.mesh.lower().endswith(".obj") else None
+            if i == 0:
+                self.base, self.faces, self.uvs, written0 = v, f, uv, written
+            else:
+                if written != written0 and None not in (written, written0):
+                    raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",
+                                     f"{k.mesh} writes {written} vertices, keyframe 0 "
+                                     f"({spec.keyframes[0].mesh}) {written0}: the files' vertex lists "
+                                     "must correspond line by line")
+                if v.shape != self.base.shape or not np.array_equal(f, self.faces):
+                    raise SceneError(scene_path, f"{key}.keyframes.{i}.mesh",
+                                     f"has {len(v)} vertices / {len(f)} faces, keyframe 0 has "
+                                     f"{len(self.base)} / {len(self.faces)} (or different faces)")
+                constant = constant and np.array_equal(v, self.base)
+            if store is not None:
+                store.add(v)
+            else:
+                stack.append(v)
+        if len(times) == 1 or constant:
+            return
+        if store is not None:
+            self.curve = LinearKeys(times, store, spec.extrapolate)
+        else:
+            self.curve = Curve(times, np.stack(stack), spec.interpolation, spec.extrapolate)
 
     def moving_curves(self):
         """The keyed curves that move this object (each with times,

@@ -58,3 +58,11 @@ def instances_into(proto, mats, out):
         out[j, 0] = np.float32(a[0, 0] * x + a[0, 1] * y + a[0, 2] * z + a[0, 3])
         out[j, 1] = np.float32(a[1, 0] * x + a[1, 1] * y + a[1, 2] * z + a[1, 3])
         out[j, 2] = np.float32(a[2, 0] * x + a[2, 1] * y + a[2, 2] * z + a[2, 3])
+
+
+@parallel_arith_kernel
+def lerp_into(p0, p1, u, out):
+    """out[i] = p0[i] + (p1[i] - p0[i]) u, in float64 (flat float32 arrays)."""
+    for i in prange(out.shape[0]):
+        a = np.float64(p0[i])
+        out[i] = np.float32(a + (np.float64(p1[i]) - a) * u)

@@ -105,7 +105,8 @@ def measure_frustrace(path, n_frames, threads, accel):
     base = _rss_bytes()                         # the interpreter, numba, the libraries
     scene = AnimatedScene(path)
     # the keyframes as stored (float32 positions), the floor a renderer of them cannot go below
-    keyframe_bytes = sum(c.values.size * 4 for c in [o.curve for o in scene.objects] if c is not None)
+    keyframe_bytes = sum(c.nbytes if hasattr(c, "nbytes") else c.values.size * 4
+                         for c in [o.curve for o in scene.objects] if c is not None)
     cfg = config_of(scene, threads=threads, **({"accel": accel} if accel else {}))
     shading = shading_of(scene)
     renderer = SceneRenderer(scene, cfg, shading)

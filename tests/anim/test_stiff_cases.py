@@ -170,7 +170,8 @@ def test_huge_offsets_and_tiny_scales_keep_float32_relative_precision(tmp_path, 
     scene = AnimatedScene(path)
     m = np.asarray(scene.objects[0].base, np.float64)
     keyed = scene.objects[1]                 # the keys as read (float32 -> float64); at 1e6
-    k0_file, k1_file = (keyed.curve.values if keyed.curve is not None   # a 1e-6 motion is below
+    k0_file, k1_file = ([np.asarray(keyed.curve.store[k], np.float64) for k in (0, 1)]
+                        if keyed.curve is not None                      # a 1e-6 motion is below
                         else [np.asarray(keyed.base, np.float64)] * 2)  # float32's resolution
     for t in (0.0, 0.3, 0.77, 1.0):
         v = scene.vertices_at(t)
