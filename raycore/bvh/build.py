@@ -344,6 +344,44 @@ def _start_build(bounds, centroids, prims, cents, span0):
     _span(prims, cents, 0, bounds.shape[0], span0, 0)
 
 
+@kernel
+def _start_build_tris(tri_verts, tris, prims, cents, span0):
+    """_start_build's rows straight from triangles tris of tri_verts, with
+    prim_bounds's boxes and centroids, bit for bit, and without their
+    (m, 9) arrays: a first build at 10M triangles held 360 MB of them."""
+    prims_i = prims.view(np.int32)
+    for k in range(tris.shape[0]):
+        t = tris[k]
+        for a in range(3):
+            lo = np.float32(np.inf)
+            hi = np.float32(-np.inf)
+            for c in range(3):
+                x = tri_verts[t, 3 * c + a]
+                lo = min(lo, x) if abs(x) < INF else lo
+                hi = max(hi, x) if abs(x) < INF else hi
+            prims[k, a] = lo
+            prims[k, 4 + a] = -hi
+            c_a = np.float32(0.5) * (lo + hi) if lo <= hi else np.float32(0.0)
+            cents[k, a] = c_a
+            cents[k, 4 + a] = -c_a
+        prims_i[k, 3] = k
+        prims[k, 7] = np.float32(0.0)
+        cents[k, 3] = np.float32(0.0)
+        cents[k, 7] = np.float32(0.0)
+    _span(prims, cents, 0, tris.shape[0], span0, 0)
+
+
+def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
+    """build_region over the triangles tris of tri_verts (their boxes and
+    centroids as prim_bounds gives them), the same tree."""
+    m = tris.shape[0]
+    prims = np.empty((m, ROW), np.float32)
+    cents = np.empty((m, ROW), np.float32)
+    span0 = np.empty((1, 2 * ROW), np.float32)
+    _start_build_tris(tri_verts, tris, prims, cents, span0)
+    return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
+
+
 def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
     """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
     node region starting at node0 (root there, children in pairs after it).
@@ -363,6 +401,12 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     cents = np.empty((m, ROW), np.float32)
     span0 = np.empty((1, 2 * ROW), np.float32)
     _start_build(bounds, centroids, prims, cents, span0)
+    return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
+
+
+def _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers):
+    """build_region from its primitives' rows (prims, cents, span0)."""
+    m = prims.shape[0]
     # a binary tree over m primitives has at most 2m - 1 nodes: the top
     # phase's first, then each task's from 2 x its first primitive on
     n_scratch = 4 * m + 1

@@ -64,10 +64,11 @@ class Bvh(NamedTuple):
 
 
 def empty_bvh(n_nodes, n_refs) -> Bvh:
-    node = np.zeros((n_nodes, 8), np.float32)
-    node_i = node.view(np.int32)
-    node_i[:, CHILD] = -1
-    return Bvh(node, node_i, np.zeros(n_refs, np.int32), np.zeros((n_refs, 9), np.float32))
+    """Arrays for n_nodes nodes and n_refs references, left unwritten: a
+    tree over m triangles is given 2m nodes and uses about a third of them
+    (MAX_LEAF triangles a leaf); pages never written take no memory."""
+    node = np.empty((n_nodes, 8), np.float32)
+    return Bvh(node, node.view(np.int32), np.empty(n_refs, np.int32), np.empty((n_refs, 9), np.float32))
 
 
 @kernel

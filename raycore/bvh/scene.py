@@ -23,7 +23,7 @@ import time
 import numba
 import numpy as np
 
-from raycore.bvh.build import SMALL_TREE, build_region, build_small_trees, gather_references, prim_bounds
+from raycore.bvh.build import SMALL_TREE, build_region, build_region_of_tris, build_small_trees, gather_references
 from raycore.bvh.nodes import MAX_LEAF, Bvh, empty_bvh
 from raycore.bvh.refit import REFIT_PIECES, refit, refit_plan
 from raycore.jit.thread_pool import on_threads
@@ -119,16 +119,12 @@ class SceneBvh:
         """Build tree g into its region from this frame's triangle corners."""
         tris = self.groups[g]
         m = len(tris)
-        bounds = np.empty((m, 6), np.float32)
-        centroids = np.empty((m, 3), np.float32)
-        prim_bounds(tri_verts, tris, bounds, centroids)
         order = np.empty(m, np.int32)
         b = self.bvh
         n0, r0 = int(self.node_lo[g]), int(self.ref_lo[g])
-        used, cost = build_region(bounds, centroids, MAX_LEAF, n0, r0, b.box, b.child, b.count, order,
-                                  numba.get_num_threads())
-        b.child[n0 + used:n0 + 2 * m] = -1
-        b.count[n0 + used:n0 + 2 * m] = 0
+        used, cost = build_region_of_tris(tri_verts, tris, MAX_LEAF, n0, r0, b.box, b.child, b.count, order,
+                                          numba.get_num_threads())
+        # the region's nodes past `used` are never reached (nor written: untouched, they take no memory)
         gather_references(tris, order, tri_verts, self.faces, r0, b.tri, b.verts, self.leaf_faces)
         self.built_cost[g] = self.cost[g] = cost
         self.used[g] = used

@@ -5,7 +5,7 @@
 """
 import numpy as np
 
-from raycore.jit.presets import helper, parallel_arith_kernel
+from raycore.jit.presets import helper, kernel, parallel_arith_kernel
 from numba import prange
 
 
@@ -40,12 +40,28 @@ def vertex_face_csr(faces: np.ndarray, n_vertices: int):
     Built once per topology; lets normals be gathered per vertex in parallel
     without atomics.
     """
-    flat = faces.reshape(-1).astype(np.int64)
-    order = np.argsort(flat, kind="stable")
-    counts = np.bincount(flat, minlength=n_vertices)
     start = np.zeros(n_vertices + 1, np.int32)
-    np.cumsum(counts, out=start[1:])
-    return start, (order // 3).astype(np.int32)
+    incident = np.empty(faces.size, np.int32)
+    _fill_csr(np.ascontiguousarray(faces, np.int32), start, incident, np.empty(n_vertices, np.int32))
+    return start, incident
+
+
+@kernel
+def _fill_csr(faces, start, incident, cursor):
+    """A counting sort of the faces by vertex, each vertex's in increasing
+    order (as a stable argsort of the corners gives them) without its
+    int64 copies (720 MB at 10M triangles)."""
+    for t in range(faces.shape[0]):
+        for k in range(3):
+            start[faces[t, k] + 1] += 1
+    for v in range(cursor.shape[0]):
+        start[v + 1] += start[v]
+        cursor[v] = start[v]
+    for t in range(faces.shape[0]):
+        for k in range(3):
+            v = faces[t, k]
+            incident[cursor[v]] = t
+            cursor[v] += 1
 
 
 @parallel_arith_kernel

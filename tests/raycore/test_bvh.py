@@ -217,7 +217,9 @@ def test_a_mesh_refits_from_its_shared_vertices_as_a_soup_does(rng):
         tv = tri_verts_of(vertices, faces)
         a, b = mesh.update(tv, vertices), as_soup.update(tv)
         assert mesh.stats["bvh_rebuilt"] == as_soup.stats["bvh_rebuilt"] == (2 if step == 0 else 0)   # refits after the first
-        np.testing.assert_array_equal(a.node.view(np.int32), b.node.view(np.int32))
+        reached = _reachable(a)
+        assert reached == _reachable(b)
+        np.testing.assert_array_equal(a.node.view(np.int32)[reached], b.node.view(np.int32)[reached])
         np.testing.assert_array_equal(a.verts, b.verts)
         np.testing.assert_array_equal(mesh.cost, as_soup.cost)
         np.testing.assert_array_equal(a.verts, tv[a.tri])
@@ -560,6 +562,18 @@ def test_a_tree_built_by_many_threads_is_the_one_built_by_one(rng, monkeypatch):
             assert np.array_equal(many[0].node_i[:one[1]], one[0].node_i[:one[1]]), name
             assert np.array_equal(many[3], one[3]), name
         b, used, cost, order = one
+        # straight from the triangles (SceneBvh's path, no box arrays): the same tree, bit for bit
+        from raycore.bvh.build import build_region_of_tris
+        from raycore.bvh.nodes import MAX_LEAF, empty_bvh
+        direct, direct_order = empty_bvh(2 * n, n), np.empty(n, np.int32)
+        sub = np.arange(n - 1, -1, -2, dtype=np.int32)             # a subset, out of order, as a group is
+        for workers in (1, 2):
+            got = build_region_of_tris(tv, sub, MAX_LEAF, 0, 0, direct.box, direct.child, direct.count,
+                                       direct_order[:len(sub)], workers)
+            want_b, want_used, want_cost, want_order = _build(tv[sub], workers)
+            assert got[0] == want_used and np.array_equal(got[1], want_cost, equal_nan=True), name
+            assert np.array_equal(direct.node_i[:got[0]], want_b.node_i[:want_used]), name
+            assert np.array_equal(direct_order[:len(sub)], want_order), name
         assert sorted(order) == list(range(n)), name
         assert cost == pytest.approx(sah_cost(b.box, b.child, b.count, 0), rel=1e-6, nan_ok=True), name
         bounds = np.empty((n, 6), np.float32)
@@ -604,6 +618,17 @@ def test_the_row_vector_min_and_swap_are_numpys(rng):
     assert np.array_equal(dst.view(np.uint32), expect.view(np.uint32))
 
 
+def _reachable(bvh, root=0):
+    """Node ids reached from the root (the top level's), parents first."""
+    out, stack = [], [root]
+    while stack:
+        i = stack.pop()
+        out.append(i)
+        if bvh.count[i] <= 0 and bvh.child[i] >= 0:
+            stack += [bvh.child[i], bvh.child[i] + 1]
+    return out
+
+
 def test_every_built_box_is_the_exact_bound_of_its_triangles(rng):
     """The build's boxes (kept as lo and -hi rows while it splits) are exactly
     the corners' bounds: a leaf's of its triangles, an inner node's of its
@@ -613,7 +638,7 @@ def test_every_built_box_is_the_exact_bound_of_its_triangles(rng):
     tv[:50] *= np.float32(1e-6)                             # tiny ones at the origin among them
     bvh = SceneBvh.of_objects(len(tv)).update(tv)
     seen = []
-    for i in range(len(bvh.count)):
+    for i in _reachable(bvh):                               # nodes past a tree's used ones are never read
         c = bvh.count[i]
         if c > 0:
             ids = bvh.tri[bvh.child[i]:bvh.child[i] + c]
@@ -676,7 +701,9 @@ def test_many_small_trees_built_in_one_call_are_those_built_one_by_one(rng, monk
         assert not calls
         monkeypatch.setattr(scene_bvh, "BATCH_TREES", batch)
         assert batched.stats["bvh_rebuilt"] == single.stats["bvh_rebuilt"]
-        for a, b in ((batched.bvh.node_i, single.bvh.node_i), (batched.bvh.tri, single.bvh.tri),
+        reached = _reachable(single.bvh)                      # nodes past a tree's used ones are never read
+        assert reached == _reachable(batched.bvh)
+        for a, b in ((batched.bvh.node_i[reached], single.bvh.node_i[reached]), (batched.bvh.tri, single.bvh.tri),
                      (batched.bvh.verts.view(np.int32), single.bvh.verts.view(np.int32)),
                      (batched.leaf_faces, single.leaf_faces), (batched.used, single.used),
                      (batched.cost.view(np.int32), single.cost.view(np.int32)),

@@ -217,3 +217,18 @@ def test_the_block_write_paints_every_pixel_of_its_block(width, offset):
             want_rgba[pixel, :3], want_rgba[pixel, 3], want_z[pixel] = rgb[:, :n].T, 1.0, depth[:n]
             np.testing.assert_array_equal(rgba, want_rgba)
             np.testing.assert_array_equal(z, want_z)
+
+
+def test_the_vertex_face_table_is_a_stable_sort_of_the_corners(rng):
+    """vertex_face_csr's counting sort against numpy's stable argsort of the
+    corners (the oracle): each vertex's faces in increasing order, a face
+    listed twice where it names a vertex twice, unused vertices empty."""
+    from raycore.geometry.mesh import vertex_face_csr
+    faces = rng.integers(0, 300, (2000, 3)).astype(np.int32)
+    faces[::7, 1] = faces[::7, 0]                         # degenerate: a vertex named twice
+    start, incident = vertex_face_csr(faces, 400)         # vertices 300..399 unused
+    flat = faces.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    np.testing.assert_array_equal(incident, order // 3)
+    np.testing.assert_array_equal(np.diff(start), np.bincount(flat, minlength=400))
+    assert start[0] == 0 and start[-1] == flat.size
