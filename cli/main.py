@@ -620,6 +620,12 @@ def check(anim_yaml, camera, strict):
                    f"one lens position per pass, {spec.render.spp} per frame")
     for o in scene.objects:
         kind = "static" if o.static else ("rigid" if o.rigid else "deforming")
+        if o.instances is not None:
+            kind = (f"{o.instances.n:,} copies of {_count(len(o.proto_faces), 'triangle')}, "
+                    f"{'still' if o.static else 'moving'}")
+        copies = sum(getattr(m, "n_instances", 0) for m in (o.usd.meshes if o.usd is not None else ()))
+        if copies:
+            kind += f", {copies:,} point-instanced copies"
         click.echo(f"    {o.name}: {_count(len(o.faces), 'triangle')}, {kind}")
     for note in scene.notes:
         click.echo(f"  {note}")

@@ -116,6 +116,8 @@ def test_a_hidden_copy_collapses_and_the_table_must_fit(tmp_path):
     path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances: {file: field.npz}\n")
     scene = AnimatedScene(path)
     assert len(scene.faces) == N * 12
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 0 and f"boxes: {N * 12} triangles, {N} copies of 12 triangles, moving" in res.output
     v = scene.vertices_at(0.4).reshape(N, 8, 3)          # key 1 holds until key 2 (t = 0.5)
     assert np.all(v[4] == v[4][0]) and not np.all(v[3] == v[3][0])
     v = scene.vertices_at(0.5).reshape(N, 8, 3)
