@@ -44,7 +44,7 @@ bench: $(STAMP)
 	$(VENV)/bin/frustrace bench
 
 ## Regenerate the README's preview images of the built-in scenes (rendered by frustrace).
-SCENES = hand runner toys marbles fairy
+SCENES = hand runner toys marbles fairy field
 previews: $(STAMP)
 	for s in $(SCENES); do \
 	  $(VENV)/bin/frustrace assets make $$s -o out/assets/$$s --overwrite --preview assets/previews/$$s.png || exit 1; \

@@ -3,13 +3,15 @@ deterministic, and know their exact motion (`exact(t)`) for interpolation
 error studies; the demo ships as files (demo.py). ALL holds both."""
 from anim.builtin.demo import DemoScene
 from anim.builtin.fairy import FairyScene
+from anim.builtin.field import FieldScene
 from anim.builtin.hand import HandScene
 from anim.builtin.marbles import MarblesScene
 from anim.builtin.runner import RunnerScene
 from anim.builtin.toys import ToysScene
 from anim.builtin.torus import TorusScene
 
-SCENES = {s.name: s for s in (HandScene, RunnerScene, ToysScene, MarblesScene, FairyScene, TorusScene)}
+SCENES = {s.name: s for s in (HandScene, RunnerScene, ToysScene, MarblesScene, FairyScene, TorusScene,
+                                      FieldScene)}
 ALL = {"demo": DemoScene, **SCENES}
 
 

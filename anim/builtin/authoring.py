@@ -109,6 +109,47 @@ class RigidPart(Part):
             f"      rotation: {{interpolation: {self.rotation}, keys: {_keys_yaml(quats)}}}\n")
 
 
+class InstancedPart(Part):
+    """Copies of one mesh, copy i placed by T_i(t) + R_i(t) (S_i * v):
+    `motion(t)` gives (T (n, 3), R (n, 3, 3), S (n, 3)), keyed at
+    `key_times` into an instance table (.npz); rotations kept in one
+    hemisphere key to key, as RigidPart's."""
+    moving = True
+
+    def __init__(self, name, vertices, faces, motion, key_times, material=None, interpolation="catmull-rom",
+                 extrapolate="loop"):
+        super().__init__(name, vertices, faces, material, mesh_file=f"{name}.obj")
+        self.motion, self.key_times = motion, np.asarray(key_times, float)
+        self.interpolation, self.extrapolate = interpolation, extrapolate
+        self.n = len(motion(0.0)[0])
+
+    @property
+    def faces_all(self):
+        m = len(self.vertices)
+        return (self.faces[None] + (np.arange(self.n) * m)[:, None, None]).reshape(-1, 3)
+
+    def exact(self, t):
+        tr, r, sc = self.motion(t)
+        return (np.einsum("nij,nvj->nvi", r, self.vertices[None] * sc[:, None]) + tr[:, None]).reshape(-1, 3)
+
+    def write(self, out_dir, written):
+        trans, quats, scales, prev = [], [], [], None
+        for t in self.key_times:
+            tr, r, sc = self.motion(t)
+            q = Rotation.from_matrix(r).as_quat()[:, [3, 0, 1, 2]]
+            if prev is not None:
+                q = np.where((np.sum(q * prev, axis=1) < 0)[:, None], -q, q)
+            prev = q
+            trans.append(tr)
+            quats.append(q)
+            scales.append(sc)
+        write_npz(out_dir / f"{self.name}_instances.npz", t=self.key_times, translation=np.array(trans),
+                  rotation=np.array(quats), scale=np.array(scales))
+        return super().write(out_dir, written) + (
+            f"    instances: {{file: {self.name}_instances.npz, interpolation: {self.interpolation}}}\n"
+            f"    extrapolate: {self.extrapolate}\n")
+
+
 class KeyframedPart(Part):
     """Vertex animation: positions(t) written as one OBJ per key time."""
     moving = True
@@ -212,7 +253,7 @@ class BuiltinScene:
 
     @property
     def triangles(self):
-        return sum(len(p.faces) for p in self.parts)
+        return sum(getattr(p, "n", 1) * len(p.faces) for p in self.parts)
 
     def exact(self, t):
         return np.concatenate([p.exact(t) for p in self.parts])

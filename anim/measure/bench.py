@@ -129,7 +129,7 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
     pools, which spin for a while after each call). With reference_z
     (frustrace's Z of the first measured frame), the share of pixels whose
     hit or miss agrees goes into the row."""
-    from anim.measure.peers import peer_frame
+    from anim.measure.peers import instanced_parts, peer_frame
     scene = AnimatedScene(path)
     lights = shading_of(scene).lights
     frames = scene.frame_numbers[:max(1, n_frames)]
@@ -137,12 +137,13 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
     for i, frame in enumerate([frames[0], *frames]):       # first pass = warm-up
         t = scene.time_of(frame)
         timings, depth = peer_frame(peer, scene.vertices_at(t), scene.faces,
-                                    CameraPose(*scene.camera_at(t)), res, res, lights)
+                                    CameraPose(*scene.camera_at(t)), res, res, lights, instanced_parts(scene, t))
         if i == 1 and reference_z is not None:
             agree = float(np.mean(np.isfinite(depth) == np.isfinite(reference_z)))
         if i > 0:
             rows.append({"interp_ms": interp_ms, **timings, "write_ms": 0.0, "tri_tests": 0})
-    row = {**_row(name, peer.name, 0, threads, scene, res, rows), "peer": True}
+    own = hasattr(peer, "build_instanced") and instanced_parts(scene, scene.time_of(frames[0])) is not None
+    row = {**_row(name, peer.name + (" (instances)" if own else ""), 0, threads, scene, res, rows), "peer": True}
     if reference_z is not None:
         row["hit_agreement"] = agree
     return row

@@ -127,7 +127,8 @@ class Mitsuba:
 
     def build(self, vertices, faces):
         mi = self.mi
-        if self.scene is None or self.shape != (len(vertices), len(faces)):
+        if self.scene is None or self.shape != (len(vertices), len(faces)) or getattr(self, "instanced", False):
+            self.instanced = False
             mesh = mi.Mesh("mesh", len(vertices), len(faces))
             params = mi.traverse(mesh)
             params["vertex_positions"] = mi.Float(vertices.ravel())
@@ -140,6 +141,67 @@ class Mitsuba:
             self.params.update()
         self.dr.eval()
 
+    def build_instanced(self, parts):
+        """The scene with Mitsuba's own instancing (instanced_parts): the
+        other objects' triangles as one mesh, and each instanced object's
+        prototype as a shapegroup with an instance per transform. A hit's
+        instance (its registry id) and primitive give back the scene's
+        triangle id, as the flattened peers' do."""
+        mi, dr = self.mi, self.dr
+        desc = {"type": "scene"}
+        if len(parts["faces"]):
+            desc["rest"] = self._mesh("rest", parts["vertices"], parts["faces"])
+        for g, (pv, pf, mats, first) in enumerate(parts["groups"]):
+            desc[f"group{g}"] = {"type": "shapegroup", "proto": self._mesh(f"proto{g}", pv, pf)}
+            for i, m in enumerate(mats):
+                desc[f"g{g}_{i}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"group{g}"},
+                                     "to_world": mi.ScalarTransform4f(np.vstack([m, [0, 0, 0, 1]]).tolist())}
+        self.scene, self.shape, self.instanced = mi.load_dict(desc), None, True
+        first_id = {}                   # registry id -> the scene's id of its first triangle
+        for shape in self.scene.shapes():
+            sid = int(np.array(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape)))[0])
+            name = shape.id()
+            if name == "rest":
+                first_id[sid] = -1
+            else:
+                g, i = (int(x) for x in name[1:].split("_"))
+                pv, pf, mats, first = parts["groups"][g]
+                first_id[sid] = first + i * len(pf)
+        self.lookup = np.full(max(first_id, default=0) + 1, -2, np.int64)
+        for sid, first in first_id.items():
+            self.lookup[sid] = first
+        self.rest_ids = parts["rest_ids"]
+        dr.eval()
+
+    def _mesh(self, name, vertices, faces):
+        mi = self.mi
+        mesh = mi.Mesh(name, len(vertices), len(faces))
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(np.ascontiguousarray(vertices, np.float32).ravel())
+        params["faces"] = mi.UInt32(np.ascontiguousarray(faces, np.uint32).ravel())
+        params.update()
+        return mesh
+
+    def closest(self, o, d):
+        pi = self.scene.ray_intersect_preliminary(self._ray(o, d))
+        if not getattr(self, "instanced", False):
+            self.dr.eval(pi.t, pi.prim_index)
+            t = np.array(pi.t)
+            prim = np.array(pi.prim_index).astype(np.int64)
+            prim[~np.isfinite(t)] = -1
+            return prim, t
+        mi, dr = self.mi, self.dr
+        inst, shape = dr.reinterpret_array(mi.UInt32, pi.instance), dr.reinterpret_array(mi.UInt32, pi.shape)
+        dr.eval(pi.t, pi.prim_index, inst, shape)
+        t = np.array(pi.t)
+        local = np.array(pi.prim_index).astype(np.int64)
+        inst, shape = np.array(inst).astype(np.int64), np.array(shape).astype(np.int64)
+        first = self.lookup[np.where(inst > 0, inst, shape)]
+        prim = np.where(first >= 0, first + local, self.rest_ids[np.minimum(local, len(self.rest_ids) - 1)]
+                        if len(self.rest_ids) else -1)
+        prim[~np.isfinite(t)] = -1
+        return prim, t
+
     def _ray(self, o, d, length=None):
         mi = self.mi
         ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k]) for k in range(3))),
@@ -147,14 +209,6 @@ class Mitsuba:
         if length is not None:
             ray.maxt = mi.Float(np.minimum(length, 3.4e38))
         return ray
-
-    def closest(self, o, d):
-        pi = self.scene.ray_intersect_preliminary(self._ray(o, d))
-        self.dr.eval(pi.t, pi.prim_index)
-        t = np.array(pi.t)
-        prim = np.array(pi.prim_index).astype(np.int64)
-        prim[~np.isfinite(t)] = -1
-        return prim, t
 
     def occluded(self, o, d, length):
         hit = self.scene.ray_test(self._ray(o, d, length))
@@ -177,21 +231,47 @@ def available_peers(threads):
     return out
 
 
-def peer_frame(peer, vertices, faces, pose, width, height, lights):
+def instanced_parts(scene, t):
+    """A scene's triangles at time t for a peer with instancing of its own,
+    or None when no object is instanced: the vertices, the faces of the
+    objects that are not instanced and their ids (rest_ids), and per
+    instanced object (prototype vertices, prototype faces, (n, 3, 4)
+    transforms, the id of its first triangle)."""
+    objects = [o for o in scene.objects if o.instances is not None]
+    if not objects:
+        return None
+    keep = np.ones(len(scene.faces), bool)
+    groups = []
+    for o in objects:
+        keep[o.face_offset:o.face_offset + len(o.faces)] = False
+        proto = np.empty((len(o.base), 3), np.float32)
+        o._place_one(t, proto)
+        groups.append((proto, o.proto_faces, o.instances.matrices(t), o.face_offset))
+    return {"vertices": scene.vertices_at(t), "faces": scene.faces[keep], "rest_ids": np.flatnonzero(keep),
+            "groups": groups}
+
+
+def peer_frame(peer, vertices, faces, pose, width, height, lights, instanced=None):
     """Timings (ms) and ray counts of one frame through `peer`, and its depth
-    per pixel (SPEC Z, +inf on a miss) for the check against frustrace's."""
+    per pixel (SPEC Z, +inf on a miss) for the check against frustrace's.
+    instanced: instanced_parts(...), for a peer with instancing of its own
+    (Mitsuba: shapegroups); the others take the flattened triangles."""
     vertices = np.ascontiguousarray(vertices, np.float32)
     faces = np.ascontiguousarray(faces, np.int32)
     o, d = camera_rays(pose, width, height)
+    own = instanced is not None and hasattr(peer, "build_instanced")
     t0 = time.perf_counter()
-    peer.build(vertices, faces)
+    if own:
+        peer.build_instanced(instanced)
+    else:
+        peer.build(vertices, faces)
     t1 = time.perf_counter()
     prim, t = peer.closest(o, d)
     t2 = time.perf_counter()
     hit = prim >= 0
     tri = vertices[faces[prim[hit]]]
-    points = o[hit] + d[hit] * t[hit, None].astype(np.float32)
     geo_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    points = o[hit] + d[hit] * t[hit, None].astype(np.float32)
     geo_n /= np.maximum(np.linalg.norm(geo_n, axis=1, keepdims=True), 1e-30)
     extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 1.0
     shadow_ms, n_shadow = 0.0, 0

@@ -24,7 +24,7 @@ def test_triangle_count_is_within_10_percent_of_the_classic_scene(name):
     assert abs(scene.triangles - scene.target_triangles) <= 0.1 * scene.target_triangles
 
 
-@pytest.mark.parametrize("name", CLASSIC)
+@pytest.mark.parametrize("name", CLASSIC + ["field"])
 def test_generation_is_deterministic(name, tmp_path):
     a = builtin.get(name).write(tmp_path / "a")
     b = builtin.get(name).write(tmp_path / "b")
@@ -34,7 +34,7 @@ def test_generation_is_deterministic(name, tmp_path):
     assert not mismatch and not errors
 
 
-@pytest.mark.parametrize("name", CLASSIC + ["torus"])
+@pytest.mark.parametrize("name", CLASSIC + ["torus", "field"])
 def test_written_scene_reproduces_the_exact_motion_at_its_keys(name, tmp_path):
     gen = builtin.get(name)
     scene = AnimatedScene(gen.write(tmp_path / name))

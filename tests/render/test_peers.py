@@ -73,3 +73,62 @@ def test_bench_peers_without_any_peer_installed_is_a_usage_error(monkeypatch):
     monkeypatch.setattr(anim.measure.peers, "available_peers", lambda threads: [])
     res = CliRunner().invoke(main, ["bench", "--scene", "demo", "--peers"])
     assert res.exit_code == 2 and "frustrace[peers]" in res.output
+
+
+class InstancedBruteForcePeer(BruteForcePeer):
+    """A peer that takes instanced_parts as they are handed to Mitsuba: it
+    places the prototypes itself and reports the scene's triangle ids."""
+    name = "bruteforce-instances"
+
+    def build_instanced(self, parts):
+        tris, ids = [parts["vertices"][parts["faces"]].reshape(-1, 9)], [parts["rest_ids"]]
+        for pv, pf, mats, first in parts["groups"]:
+            placed = np.einsum("nij,vj->nvi", mats[:, :, :3], pv.astype(np.float64)) + mats[:, None, :, 3]
+            tris.append(placed[:, pf].reshape(-1, 9))
+            ids.append(first + np.arange(len(mats) * len(pf)))
+        self.tri = np.concatenate(tris).astype(np.float32)
+        self.ids = np.concatenate(ids)
+
+    def closest(self, o, d):
+        prim, t = super().closest(o, d)
+        return np.where(prim >= 0, self.ids[np.maximum(prim, 0)], -1), t
+
+
+def test_a_peer_with_instancing_sees_the_scene_the_flattened_peers_see(tmp_path):
+    """instanced_parts (what Mitsuba's shapegroups get): prototypes, per-copy
+    transforms and the scene's triangle ids, placed by the peer, give the
+    flattened peer's triangle ids and depth on every pixel."""
+    from anim.measure.peers import instanced_parts, peer_frame
+    from anim.render.settings import shading_of
+    from anim.scene import AnimatedScene
+    (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")
+    rng = np.random.default_rng(8)
+    keys = "".join(f"        - {{t: {t}, translation: {rng.uniform(-2, 2, (30, 3)).round(3).tolist()}, "
+                   f"rotation: {rng.normal(size=(30, 4)).round(3).tolist()}}}\n" for t in (0, 1))
+    path = tmp_path / "s.yaml"
+    path.write_text(f"""version: 1
+camera: {{eye: [0, 0, 8], look_at: [0, 0, 0], fov: 45}}
+lights: [{{position: [2, 3, 6], intensity: 20}}]
+objects:
+  - name: ground
+    mesh: tri.obj
+    transform: {{scale: {{keys: [[0, 4, 4, 0.1]]}}, translation: {{keys: [[0, -2, -2, -1]]}}}}
+  - name: copies
+    mesh: tri.obj
+    instances:
+      keys:
+{keys}""")
+    scene = AnimatedScene(path)
+    lights = shading_of(scene).lights
+    t = 0.4
+    pose = CameraPose(*scene.camera_at(t))
+    parts = instanced_parts(scene, t)
+    assert len(parts["groups"]) == 1 and len(parts["rest_ids"]) == 4
+    flat, inst = BruteForcePeer(), InstancedBruteForcePeer()
+    timings_f, depth_f = peer_frame(flat, scene.vertices_at(t), scene.faces, pose, 24, 24, lights)
+    timings_i, depth_i = peer_frame(inst, scene.vertices_at(t), scene.faces, pose, 24, 24, lights, parts)
+    assert np.isfinite(depth_f).mean() > 0.2
+    np.testing.assert_allclose(depth_i, depth_f, rtol=1e-5)
+    o, d = camera_rays(pose, 24, 24)
+    np.testing.assert_array_equal(inst.closest(o, d)[0], flat.closest(o, d)[0])
+    assert timings_i["shadow_rays"] == timings_f["shadow_rays"]
