@@ -28,6 +28,18 @@ from raycore.jit.floats import INF
 N_BINS = 16
 
 
+@helper
+def _tri_extent(tri_verts, t, a):
+    """(lo, hi) of triangle t's finite corners along axis a (inf, -inf: none)."""
+    lo = np.float32(np.inf)
+    hi = np.float32(-np.inf)
+    for c in range(3):
+        x = tri_verts[t, 3 * c + a]
+        lo = min(lo, x) if abs(x) < INF else lo
+        hi = max(hi, x) if abs(x) < INF else hi
+    return lo, hi
+
+
 @kernel
 def prim_bounds(tri_verts, tris, bounds, centroids):
     """Box (6) and centroid (3) of each triangle tris[k] of tri_verts. A
@@ -38,12 +50,7 @@ def prim_bounds(tri_verts, tris, bounds, centroids):
     for k in range(tris.shape[0]):
         t = tris[k]
         for a in range(3):
-            lo = np.float32(np.inf)
-            hi = np.float32(-np.inf)
-            for c in range(3):
-                x = tri_verts[t, 3 * c + a]
-                lo = min(lo, x) if abs(x) < INF else lo
-                hi = max(hi, x) if abs(x) < INF else hi
+            lo, hi = _tri_extent(tri_verts, t, a)
             bounds[k, a] = lo
             bounds[k, 3 + a] = hi
             centroids[k, a] = np.float32(0.5) * (lo + hi) if lo <= hi else np.float32(0.0)
@@ -353,12 +360,7 @@ def _start_build_tris(tri_verts, tris, prims, cents, span0):
     for k in range(tris.shape[0]):
         t = tris[k]
         for a in range(3):
-            lo = np.float32(np.inf)
-            hi = np.float32(-np.inf)
-            for c in range(3):
-                x = tri_verts[t, 3 * c + a]
-                lo = min(lo, x) if abs(x) < INF else lo
-                hi = max(hi, x) if abs(x) < INF else hi
+            lo, hi = _tri_extent(tri_verts, t, a)
             prims[k, a] = lo
             prims[k, 4 + a] = -hi
             c_a = np.float32(0.5) * (lo + hi) if lo <= hi else np.float32(0.0)
@@ -374,10 +376,7 @@ def _start_build_tris(tri_verts, tris, prims, cents, span0):
 def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
     """build_region over the triangles tris of tri_verts (their boxes and
     centroids as prim_bounds gives them), the same tree."""
-    m = tris.shape[0]
-    prims = np.empty((m, ROW), np.float32)
-    cents = np.empty((m, ROW), np.float32)
-    span0 = np.empty((1, 2 * ROW), np.float32)
+    prims, cents, span0 = _empty_rows(tris.shape[0])
     _start_build_tris(tri_verts, tris, prims, cents, span0)
     return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
 
@@ -396,12 +395,14 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     regions; then one pass lays the nodes out as a single serial pass
     would, so the tree does not depend on the thread count (nor on whether
     it was built in parallel at all)."""
-    m = bounds.shape[0]
-    prims = np.empty((m, ROW), np.float32)
-    cents = np.empty((m, ROW), np.float32)
-    span0 = np.empty((1, 2 * ROW), np.float32)
+    prims, cents, span0 = _empty_rows(bounds.shape[0])
     _start_build(bounds, centroids, prims, cents, span0)
     return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
+
+
+def _empty_rows(m):
+    """The build's rows of m primitives (prims, cents) and their span (see ROW)."""
+    return np.empty((m, ROW), np.float32), np.empty((m, ROW), np.float32), np.empty((1, 2 * ROW), np.float32)
 
 
 def _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers):
