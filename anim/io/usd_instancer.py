@@ -15,6 +15,7 @@ a prim (`meshes_under`), so that this module does not import it back."""
 import numpy as np
 
 from anim.errors import SceneError
+from anim.materials import DEFAULT_MATERIAL
 
 _INSTANCE_ATTRS = ("protoIndices", "positions", "orientations", "orientationsf", "scales", "invisibleIds",
                    "inactiveIds", "velocities", "angularVelocities", "accelerations")
@@ -48,6 +49,7 @@ class PointInstancer:
         self.proto = self._proto_indices(len(roots))
         n = len(self.proto)
         self._check_arrays(n)
+        colours = self._instance_colours(pxr, n)
         self.blocks = []          # (mesh, prototype root, instance ids, vertex offset)
         faces, uvs, per_tri, found, offset = [], [], [], [], 0
         for p, root in enumerate(roots):
@@ -72,8 +74,14 @@ class PointInstancer:
                 tri, mats = mesh.materials
                 local = np.arange(len(mats) + 1) + len(found)
                 local[-1] = -1
-                per_tri.append(np.tile(np.where(tri >= 0, local[tri], -1), len(ids)))
+                slots = np.tile(np.where(tri >= 0, local[tri], -1)[None], (len(ids), 1))
                 found += mats
+                if colours is not None:
+                    # the instancer's displayColor, per copy, where the prototype has no material of its own
+                    plain = (tri < 0) | np.array([mats[k]["name"].startswith("displayColor") if k >= 0 else True
+                                                  for k in tri], bool)
+                    slots[:, plain] = (colour_slot(colours, ids, found))[:, None]
+                per_tri.append(slots.reshape(-1))
                 self.notes += mesh.notes
                 offset += nv * len(ids)
         self.n_vertices = offset
@@ -96,6 +104,26 @@ class PointInstancer:
         self.static = not (moving_xform or varying or self.hides) and all(b[0].static for b in self.blocks)
         self.rigid = False
         self.n_instances = n
+
+    def _instance_colours(self, pxr, n):
+        """(n, 3) colours from the instancer's primvars:displayColor, one per
+        instance (vertex or varying interpolation) or one for all
+        (constant), or None; copies take them where their prototype has no
+        material bound (as USD viewers show instance primvars)."""
+        primvar = pxr.UsdGeom.PrimvarsAPI(self.prim).GetPrimvar("displayColor")
+        if not primvar or not primvar.HasAuthoredValue():
+            return None
+        values = primvar.ComputeFlattened()
+        if values is None or len(values) == 0:
+            return None
+        rgb = np.clip(np.asarray(values, np.float64).reshape(-1, 3), 0.0, 1e6)
+        if primvar.GetInterpolation() == "constant" or len(rgb) == 1:
+            return np.repeat(rgb[:1], n, axis=0)
+        if len(rgb) != n:
+            self._fail(f"primvars:displayColor has {len(rgb)} values for {n} instances")
+        if not np.all(np.isfinite(rgb)):
+            self._fail("primvars:displayColor holds inf or NaN")
+        return rgb
 
     def _fail(self, problem):
         raise SceneError(self.scene_path, self.key, f"point instancer {self.path}: {problem}")
@@ -193,6 +221,17 @@ def check_cycles(stage, pxr, scene_path, key):
     for path in instancers:
         if path not in state:
             visit(path, [path])
+
+
+def colour_slot(colours, ids, found):
+    """The material slot of each copy's colour (colours[ids]), appending a
+    displayColor material per distinct colour to `found`."""
+    unique, inverse = np.unique(colours[ids], axis=0, return_inverse=True)
+    base = len(found)
+    for rgb in unique:
+        rgb = tuple(float(c) for c in rgb)
+        found.append({**DEFAULT_MATERIAL, "name": f"displayColor {rgb}", "diffuse": rgb, "uv_set": "st"})
+    return base + inverse.reshape(-1)
 
 
 def _ancestors(prim):

@@ -215,3 +215,36 @@ def test_a_bad_point_instancer_is_one_line_and_exit_2(tmp_path, damage, words):
                                  else [command, str(path)])
         assert res.exit_code == 2 and words in res.output, res.output
         assert len(res.output.strip().splitlines()) == 1
+
+
+def test_the_instancers_display_colour_colours_each_copy(tmp_path):
+    """primvars:displayColor on the instancer, one value per instance: each
+    copy of a prototype without a material takes its own; a constant one
+    colours them all; a wrong count is one line and exit 2."""
+    from anim.scene import AnimatedScene
+    data = _instance_data()
+    path = tmp_path / "pi.usda"
+    _instanced_stage(path, data)
+    stage = Usd.Stage.Open(str(path))
+    pi = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/PI"))
+    rgb = np.random.default_rng(1).uniform(0, 1, (N, 3)).astype(np.float32)
+    primvar = UsdGeom.PrimvarsAPI(pi).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                   UsdGeom.Tokens.vertex)
+    primvar.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, c)) for c in rgb]))
+    stage.Save()
+    scene = AnimatedScene(path)
+    (obj,) = [o for o in scene.objects if o.name == "/World/PI"]
+    rows = scene.material_table[scene.tri_material[obj.face_offset:obj.face_offset + len(obj.faces)]]
+    # the copies in their layout: per prototype, per mesh, per instance using it
+    got, start = {}, 0
+    for mesh, root, ids, offset in obj.usd.meshes[0].blocks:
+        for i in ids:
+            got[int(i)] = rows[start:start + len(mesh.faces), :3]
+            start += len(mesh.faces)
+    assert len(got) == N and len(np.unique(rows[:, :3], axis=0)) == N
+    for i, colours in got.items():
+        np.testing.assert_allclose(colours, np.broadcast_to(rgb[i], colours.shape), rtol=1e-6)
+    primvar.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, c)) for c in rgb[:5]]))
+    stage.Save()
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "displayColor has 5 values for 14 instances" in res.output, res.output
