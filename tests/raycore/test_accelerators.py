@@ -116,3 +116,35 @@ def test_camera_rays_from_inside_and_outside_match_brute_force(rng, eye):
         idx = (row_off[:, None] + col_off[None, :]).reshape(-1)
         agree((hits.t[idx], hits.prim[idx], hits.b1[idx], hits.b2[idx]), want)
         assert hits.counters.packets > 0, name
+
+
+@pytest.mark.parametrize("name", ["grid", "bvh"])
+def test_every_structure_auto_picks_matches_brute_force_on_a_million_triangles(rng, name):
+    """The structures `render.accel: auto` chooses between (the grid and the
+    BVH), on the 1M-triangle rippling torus of `bench --scale`: camera rays
+    at random pixels, rays from inside it in random and axis-parallel
+    directions and through its vertices, against brute force over all
+    triangles."""
+    from anim.measure.scale import torus
+    v, f = torus(1_000_000, 0.3)
+    tv = tri_verts_of(np.asarray(v, np.float32), np.asarray(f, np.int32))
+    assert len(tv) >= 990_000
+    n = 240
+    o = np.empty((n, 3), np.float32)
+    d = rng.normal(size=(n, 3)).astype(np.float32)
+    o[:80] = (0.0, 2.6, 2.9)                                                # the camera, at random pixels
+    d[:80] = rng.uniform(-0.4, 0.4, (80, 3)) + np.float32([0, -2.2, -2.9])
+    o[80:] = rng.uniform(-1.2, 1.2, (n - 80, 3)) * np.float32([1, 0.5, 1]) + np.float32([0, 0.4, 0])
+    d[80:140] = 0
+    d[np.arange(80, 140), rng.integers(0, 3, 60)] = rng.choice([-1.0, 1.0], 60)   # axis-parallel
+    d[140:200] = tv[rng.integers(0, len(tv), 60), :3] - o[140:200]              # through vertices
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.ascontiguousarray(d, np.float32)
+    want = brute_force_closest(o, d, np.zeros(n, np.float32), np.full(n, np.inf, np.float32), tv)
+    assert (want[1] >= 0).mean() > 0.5
+    accel = (GridAccel(build_grid(tv), tv, 8) if name == "grid"
+             else BvhAccel(SceneBvh.of_objects(len(tv), [(0, len(tv))]).update(tv), tv))
+    agree(accel.trace_rays(o, d)[:4], want)
+    anyh = accel.trace_rays(o, d, any_hit=True)
+    hit_want = want[1] >= 0
+    assert np.all((anyh.prim >= 0)[hit_want] | near_edge(want[2], want[3])[hit_want])
