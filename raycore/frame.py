@@ -257,8 +257,9 @@ class FrameRender:
         self.counters["primary_visits"] += c.visits
         self.counters["primary_tests"] += c.tests
         if self.one_sweep:
+            normals = scene.normals_for(hits.prim)
             t0 = time.perf_counter()
-            sweep = shade_image(scene.cam, jitter, hits, layout, scene.tri_verts, geom.faces, scene.normals,
+            sweep = shade_image(scene.cam, jitter, hits, layout, scene.tri_verts, geom.faces, normals,
                                 geom.tri_material, shading.materials, geom.uvs, shading.tex_data, shading.tex_info,
                                 shading.lights, scene.shadow_accel.bvh if self.cast_shadows else None,
                                 self.first_rows, self.cfg.ambient, self.bg, weight, accumulate, rgba, z)
@@ -294,8 +295,9 @@ class FrameRender:
         """The visible surface of one pass of camera hits (timed as shading)."""
         scene, geom, shading = self.scene, self.geom, self.shading
         t0 = time.perf_counter()
+        normals = scene.normals_for(prim)
         surface = visible_surface(scene.cam, jitter, t, prim, b1, b2, *layout, scene.tri_verts, geom.faces,
-                                  scene.normals, geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
+                                  normals, geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
                                   shading.tex_info, self.buffers.work)
         self.timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
         return surface

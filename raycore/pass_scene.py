@@ -22,6 +22,7 @@ class PassScene:
         self.key = None                      # (time, lens) of what is built now
         self.built_vertices = None           # the vertices the structures were built over
         self.pose = self.pinhole = None
+        self.lazy = False                    # vertex normals made for the seen vertices only (normals_for)
         self.times_seen, self.lens_seen = set(), set()
         if motion is None:                   # else the first pass's move_to builds
             self.build(geom.vertices, pose)
@@ -39,12 +40,27 @@ class PassScene:
             self.counters["builds"] += 1
             self.timings["build_ms"] += (time.perf_counter() - t0) * 1e3
             t0 = time.perf_counter()
-            self.normals = self.structures.normals_now()
+            self.lazy = self.structures.lazy_normals(cfg.width * cfg.height)
+            if self.lazy:
+                self.structures.forget_normals()
+                self.normals = self.structures.normals
+            else:
+                self.normals = self.structures.normals_now()
             self.timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
         if pose != self.pose:
             self.pose = pose
             self.pinhole = camera_basis(pose.eye, pose.look_at, pose.up, pose.fov, cfg.width, cfg.height)
         self.cam = self.pinhole
+
+    def normals_for(self, prim):
+        """The vertex normals the hits prim (triangle ids, -1 misses) need:
+        made now for the vertices they see when the frame's are made lazily
+        (FrameStructures.lazy_normals), else all made at the build."""
+        if self.lazy:
+            t0 = time.perf_counter()
+            self.structures.normals_for(prim)
+            self.timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
+        return self.normals
 
     def move_to(self, sample):
         """Structures and camera of a pass at (time, lens_x, lens_y): time in

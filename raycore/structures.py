@@ -12,7 +12,8 @@ import numpy as np
 
 from raycore.accelerators import BvhAccel, GridAccel, KdAccel
 from raycore.bvh.scene import SceneBvh
-from raycore.geometry.mesh import gather_some_triangles, gather_triangles, vertex_normals, vertex_normals_of
+from raycore.geometry.mesh import (gather_some_triangles, gather_triangles, mark_hit_vertices, vertex_normals,
+                                   vertex_normals_of, wanted_vertex_normals)
 from raycore.grid.build import Grid, finite_bounds
 from raycore.grid.incremental import MIN_STATIC_SHARE, IncrementalGrid, full_grid
 from raycore.kdtree.build import build_kdtree
@@ -32,6 +33,7 @@ class FrameStructures:
         n = faces.shape[0]
         self.tri_verts = np.empty((n, 9), np.float32)
         self.normals = np.empty((n_vertices, 3), np.float32)
+        self.normal_state = None      # per vertex: 0 none, 1 wanted, 2 made (lazy_normals)
         self.incremental = moving_tris is not None and n - len(moving_tris) >= MIN_STATIC_SHARE * n
         if self.incremental:
             moving = np.zeros(n, bool)
@@ -56,6 +58,27 @@ class FrameStructures:
     def all_static(self):
         """True when no triangle of the scene ever moves (the camera may)."""
         return self.incremental and len(self.moving) == 0
+
+    def lazy_normals(self, n_pixels):
+        """Whether this frame's vertex normals are better made for the
+        vertices that are seen (normals_for) than for all: a scene that
+        moves whole, with more vertices than twice the pixels (at 10M
+        triangles all of them took 120 ms a frame, for a million pixels)."""
+        return not self.incremental and self.normals.shape[0] > 2 * n_pixels
+
+    def forget_normals(self):
+        """A new frame's vertices: no normal made yet (for normals_for)."""
+        if self.normal_state is None:
+            self.normal_state = np.zeros(self.normals.shape[0], np.uint8)
+        else:
+            self.normal_state.fill(0)
+
+    def normals_for(self, prim):
+        """The vertex normals, made now for the vertices of the hit triangles
+        prim that have none yet (after forget_normals)."""
+        mark_hit_vertices(prim.reshape(-1), self.faces, self.normal_state)
+        wanted_vertex_normals(self.normal_state, self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+        return self.normals
 
     def normals_now(self):
         """Vertex normals of the triangles of the last update (moving ones

@@ -78,6 +78,30 @@ def vertex_normals_of(ids, tri_verts, vf_start, vf_faces, normals):
         _vertex_normal(tri_verts, vf_start, vf_faces, normals, ids[i])
 
 
+@parallel_arith_kernel
+def mark_hit_vertices(prim, faces, state):
+    """state[v] = 1 (wanted) for the vertices of the hit triangles prim (-1:
+    a miss) whose normal is not made yet (state 0). Threads may mark one
+    vertex at once: they write the same byte."""
+    for i in prange(prim.shape[0]):
+        t = prim[i]
+        if t >= 0:
+            for k in range(3):
+                v = faces[t, k]
+                if state[v] == 0:
+                    state[v] = 1
+
+
+@parallel_arith_kernel
+def wanted_vertex_normals(state, tri_verts, vf_start, vf_faces, normals):
+    """vertex_normals for the vertices marked wanted (state 1), then made (2):
+    the same normals, bit for bit, for the vertices that are seen."""
+    for v in prange(state.shape[0]):
+        if state[v] == 1:
+            _vertex_normal(tri_verts, vf_start, vf_faces, normals, v)
+            state[v] = 2
+
+
 @helper
 def _vertex_normal(tri_verts, vf_start, vf_faces, normals, v):
     """Area-weighted normal of vertex v from its incident triangles."""
