@@ -9,6 +9,7 @@ time, as a TRS transform places an object. The copies are laid out one
 after another (copy i's vertices at i * n_v): the frame's triangles are the
 prototype's, repeated."""
 from pathlib import Path
+import zipfile
 
 import numpy as np
 
@@ -113,16 +114,25 @@ class InstanceTable:
         try:
             with np.load(path, allow_pickle=False) as data:
                 out = {name: np.asarray(data[name]) for name in data.files}
-        except (OSError, ValueError) as exc:
-            raise SceneError(scene_path, f"{key}.file", f"cannot read {path.name}: {exc}") from None
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise SceneError(scene_path, f"{key}.file", f"cannot read {path.name} as .npz: {exc}") from None
         unknown = set(out) - {"t", "translation", "rotation", "scale", "visible"}
         if unknown or "t" not in out or "translation" not in out:
             raise SceneError(scene_path, f"{key}.file", f"{path.name} holds {sorted(out)}; expected t, translation "
                                                         "and optionally rotation, scale, visible")
-        for name in out:
-            if name != "visible":
-                out[name] = np.asarray(out[name], np.float64)
-        out["t"] = out["t"].reshape(-1)
+        for name, a in out.items():
+            if name == "visible":
+                if a.dtype.kind not in "biu" or (a.dtype.kind != "b" and not np.isin(a, (0, 1)).all()):
+                    raise SceneError(scene_path, f"{key}.file", f"{path.name}: visible holds {a.dtype}; expected "
+                                                                "true/false (or 0/1) per instance and key")
+                out[name] = a.astype(bool)
+            elif a.dtype.kind not in "iuf":
+                raise SceneError(scene_path, f"{key}.file", f"{path.name}: {name} holds {a.dtype}; expected numbers")
+            else:
+                out[name] = a.astype(np.float64)
+        if out["t"].ndim != 1 or len(out["t"]) == 0:
+            raise SceneError(scene_path, f"{key}.file", f"{path.name}: t has shape {out['t'].shape}; expected one "
+                                                        "key time or more, (k,)")
         return out
 
     def matrices(self, t):

@@ -204,3 +204,24 @@ def test_gltf_gpu_instancing_places_each_copy_under_its_node(tmp_path):
     b2.save(tmp_path / "copies.glb", [node])
     res = CliRunner().invoke(main, ["check", str(path)])
     assert res.exit_code == 2 and "ROTATION holds inf or NaN" in res.output, res.output
+
+
+@pytest.mark.parametrize("arrays, words", [
+    (dict(t=np.array([0.0]), translation=np.array([[["a", "b", "c"]]])), "translation holds <U1; expected numbers"),
+    (dict(t=np.array([0.0]), translation=np.zeros((1, 2, 3), complex)), "translation holds complex128"),
+    (dict(t=np.array([0.0]), translation=np.zeros((1, 2, 3)), visible=np.array([[0.5, 1.0]])), "visible holds float64"),
+    (dict(t=np.zeros(0), translation=np.zeros((0, 2, 3))), "t has shape (0,)"),
+    (None, "cannot read field.npz as .npz"),
+])
+def test_an_instance_file_of_the_wrong_kind_is_one_line_and_exit_2(tmp_path, arrays, words):
+    """Strings, complex numbers, fractional visibility, no keys, not an .npz."""
+    _box(tmp_path)
+    if arrays is None:
+        (tmp_path / "field.npz").write_bytes(b"PK\x03\x04 cut short")
+    else:
+        np.savez(tmp_path / "field.npz", **arrays)
+    path = tmp_path / "bad.yaml"
+    path.write_text(HEAD + "  - name: boxes\n    mesh: box.obj\n    instances: {file: field.npz}\n")
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and words in res.output and "objects.0.instances.file" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1
