@@ -17,6 +17,7 @@ from anim.area_lights import emitter_positions
 from anim.errors import SceneError
 from anim.instances import InstanceTable
 from anim.keyframes import KeyStore, LinearKeys
+from anim.memory import check_copies
 from anim.interpolate import Curve
 from anim.materials import DEFAULT_MATERIAL
 from anim.io.mesh_io import load_mesh, vertex_lines
@@ -171,6 +172,8 @@ class SceneObject:
         written becomes the prototype, placed into a buffer of its own."""
         table = InstanceTable(spec.instances, base, scene_path, f"{key}.instances", owner, spec.extrapolate)
         nv = len(self.base)
+        check_copies(table.n * len(self.faces), f"{table.n:,} copies of {len(self.faces):,} triangles", scene_path,
+                     f"{key}.instances")
         if table.n * max(nv, len(self.faces)) >= 2 ** 31:
             raise SceneError(scene_path, f"{key}.instances", f"{table.n} copies of {len(self.faces)} triangles "
                                                              "are more than 2^31 vertices or triangles")

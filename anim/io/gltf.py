@@ -18,6 +18,7 @@ import pygltflib
 from anim.errors import SceneError
 from anim.interpolate import wrap_time
 from anim.materials import pbr_material
+from anim.memory import check_copies
 from anim.track_kernels import quat_to_matrix, slerp_into
 from anim.vertex_kernels import instances_into, skin_into, transform_into
 
@@ -273,6 +274,9 @@ class GltfObject:
                         self._fail(f"mesh {node.mesh}: JOINTS_0 index beyond skin {node.skin}'s joints")
                     inst["skin"] = (np.asarray(skin.joints), ibm.astype(np.float64),
                                     np.ascontiguousarray(joint), np.ascontiguousarray(weight, np.float32))
+                if copies is not None:
+                    check_copies(len(copies) * (len(idx) // 3), f"node {node_index}: {len(copies):,} "
+                                 "EXT_mesh_gpu_instancing copies", self.scene_path, self.key)
                 if copies is not None and inst["skin"] is not None:
                     self._fail(f"node {node_index}: a skinned mesh with EXT_mesh_gpu_instancing is not supported")
                 n = 1 if copies is None else len(copies)

@@ -16,6 +16,7 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.materials import DEFAULT_MATERIAL
+from anim.memory import check_copies
 
 _INSTANCE_ATTRS = ("protoIndices", "positions", "orientations", "orientationsf", "scales", "invisibleIds",
                    "inactiveIds", "velocities", "angularVelocities", "accelerations")
@@ -51,7 +52,7 @@ class PointInstancer:
         self._check_arrays(n)
         colours = self._instance_colours(pxr, n)
         self.blocks = []          # (mesh, prototype root, instance ids, vertex offset)
-        faces, uvs, per_tri, found, offset = [], [], [], [], 0
+        parts = []                # (prototype root, its instances, its meshes)
         for p, root in enumerate(roots):
             ids = np.flatnonzero(self.proto == p)
             if len(ids) == 0:
@@ -63,7 +64,12 @@ class PointInstancer:
                 if mesh_prim.IsA(pxr.UsdGeom.PointInstancer):
                     self._fail(f"prototype {root.GetPath()} holds point instancer {mesh_prim.GetPath()}: nested "
                                "point instancers are not supported yet")
-                mesh = mesh_of(mesh_prim)
+            parts.append((root, ids, [mesh_of(m) for m in prims]))
+        check_copies(sum(len(ids) * len(m.faces) for _, ids, meshes in parts for m in meshes),
+                     f"point instancer {self.path}: {n:,} instances", scene_path, key)
+        faces, uvs, per_tri, found, offset = [], [], [], [], 0
+        for root, ids, meshes in parts:
+            for mesh in meshes:
                 if mesh.skinning is not None:
                     self._fail(f"prototype mesh {mesh.path} is skinned; skinned prototypes are not supported")
                 nv = mesh.n_vertices

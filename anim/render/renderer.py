@@ -5,6 +5,7 @@ checked before it starts."""
 import time
 
 from anim.errors import SceneError
+from anim.memory import available_bytes, size_text
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.geometry.camera import camera_basis
@@ -110,18 +111,6 @@ BUDGET_BYTES_PER_PIXEL = 2 * 96 + 28
 BYTES_PER_TRIANGLE = 36 + 16 + 24 + 16 + 64
 
 
-def available_bytes():
-    """MemAvailable of /proc/meminfo (None where there is none)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return None
-
-
 def check_memory(scene, cfg, available=None):
     """SceneError (exit 2) with the estimate if rendering would not fit in
     the memory available now, instead of an out-of-memory kill mid-run."""
@@ -136,9 +125,5 @@ def check_memory(scene, cfg, available=None):
         key = "output.resolution" if [cfg.width, cfg.height] == list(scene.spec.output.resolution) else "--res"
         raise SceneError(scene.path, key,
                          f"{cfg.width}x{cfg.height} with {scene.faces.shape[0]:,} triangles needs about "
-                         f"{_size(need)} of work memory; {_size(available)} are available")
+                         f"{size_text(need)} of work memory; {size_text(available)} are available")
     return need
-
-
-def _size(n_bytes) -> str:
-    return f"{n_bytes / 1024 ** 3:.1f} GiB" if n_bytes >= 1024 ** 3 else f"{n_bytes / 1024 ** 2:.0f} MiB"

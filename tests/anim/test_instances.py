@@ -225,3 +225,20 @@ def test_an_instance_file_of_the_wrong_kind_is_one_line_and_exit_2(tmp_path, arr
     res = CliRunner().invoke(main, ["check", str(path)])
     assert res.exit_code == 2 and words in res.output and "objects.0.instances.file" in res.output, res.output
     assert len(res.output.strip().splitlines()) == 1
+
+
+def test_copies_that_would_not_fit_are_refused_before_they_are_made(tmp_path, monkeypatch):
+    """Instances are made into the frame's triangles: more of them than the
+    free memory holds (~220 bytes a triangle) is one line and exit 2,
+    naming the copies, before any is made (here: 9 copies of 12 triangles
+    against 20 KB)."""
+    import anim.memory
+    _box(tmp_path)
+    tr, q, scale = _data()
+    path = _instanced(tmp_path, tr, q, scale)
+    monkeypatch.setattr(anim.memory, "available_bytes", lambda: 20_000)
+    res = CliRunner().invoke(main, ["check", str(path)])
+    assert res.exit_code == 2 and "9 copies of 12 triangles make 108 triangles" in res.output, res.output
+    assert "objects.0.instances" in res.output and len(res.output.strip().splitlines()) == 1
+    monkeypatch.setattr(anim.memory, "available_bytes", lambda: None)          # unknown: no refusal
+    assert CliRunner().invoke(main, ["check", str(path)]).exit_code == 0

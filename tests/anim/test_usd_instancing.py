@@ -248,3 +248,12 @@ def test_the_instancers_display_colour_colours_each_copy(tmp_path):
     stage.Save()
     res = CliRunner().invoke(main, ["check", str(path)])
     assert res.exit_code == 2 and "displayColor has 5 values for 14 instances" in res.output, res.output
+
+
+def test_a_point_instancer_that_would_not_fit_is_refused(tmp_path, monkeypatch):
+    import anim.memory
+    _instanced_stage(tmp_path / "pi.usda", _instance_data())
+    monkeypatch.setattr(anim.memory, "available_bytes", lambda: 50_000)
+    res = CliRunner().invoke(main, ["check", str(tmp_path / "pi.usda")])
+    assert res.exit_code == 2 and "point instancer /World/PI: 14 instances make" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1
