@@ -19,6 +19,31 @@ def available_bytes():
     return None
 
 
+def status_bytes(field):
+    """A memory figure of /proc/self/status (VmHWM: peak resident, VmRSS: now), in bytes (0 where there is none)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+# the process before any scene: the interpreter and the libraries imported so far
+BASE_RSS = status_bytes("VmRSS")
+
+
+def peak_report(n_triangles, key_bytes):
+    """{peak_rss_bytes, bytes_per_triangle}: this process's peak resident
+    memory, and what it holds a triangle beyond the process before any
+    scene (BASE_RSS) and the keyframes as stored (key_bytes)."""
+    peak = status_bytes("VmHWM")
+    return {"peak_rss_bytes": peak,
+            "bytes_per_triangle": round((peak - BASE_RSS - key_bytes) / max(n_triangles, 1), 1) if peak else None}
+
+
 def size_text(n_bytes) -> str:
     return f"{n_bytes / 1024 ** 3:.1f} GiB" if n_bytes >= 1024 ** 3 else f"{n_bytes / 1024 ** 2:.0f} MiB"
 

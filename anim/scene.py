@@ -530,6 +530,13 @@ class AnimatedScene:
         return ranges
 
     @property
+    def key_bytes(self):
+        """Bytes of the vertex keyframes as stored (float32 positions): the
+        floor a renderer of them cannot go below."""
+        return sum(c.nbytes if hasattr(c, "nbytes") else c.values.size * 4
+                   for c in [o.curve for o in self.objects] if c is not None)
+
+    @property
     def moving_triangles(self):
         """Ids of the triangles of moving objects, or None when nothing is
         static (then every frame simply rebuilds everything)."""

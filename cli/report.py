@@ -102,6 +102,11 @@ def summary_table(stats):
     console.print(table)
     if stats.get("accel_choice"):
         console.print(f"camera rays: {stats['accel_choice']}")
+    if s.get("peak_rss_bytes"):
+        per_tri = s.get("bytes_per_triangle")
+        console.print(f"peak RSS {s['peak_rss_bytes'] / 1024 ** 3:.2f} GB"
+                      + (f" ({per_tri:,.0f} bytes a triangle beyond the process before the scene and the keyframes)"
+                         if per_tri is not None else ""))
     warm = s.get("warm_up_s", s["compile_s"])
     console.print(f"fps_raycast {s['fps_raycast']:.1f}   fps_full {s['fps_full']:.1f}   "
                   f"fps_wall {s['fps_wall']:.1f}   warm-up {warm:.2f} s (not in fps; "

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from anim.memory import status_bytes
+
 PHASES = ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms")
 KEYS = 3                                   # vertex keyframes at t = 0, 0.5, 1 s
 PERIOD = 2.0
@@ -75,21 +77,12 @@ objects:
     return folder / "anim.yaml"
 
 
-def _status_bytes(field):
-    """A memory figure of /proc/self/status (VmHWM: peak resident, VmRSS: now), in bytes."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
 def _peak_rss_bytes():
-    return _status_bytes("VmHWM")
+    return status_bytes("VmHWM")
 
 
 def _rss_bytes():
-    return _status_bytes("VmRSS")
+    return status_bytes("VmRSS")
 
 
 def measure_frustrace(path, n_frames, threads, accel):
@@ -105,8 +98,7 @@ def measure_frustrace(path, n_frames, threads, accel):
     base = _rss_bytes()                         # the interpreter, numba, the libraries
     scene = AnimatedScene(path)
     # the keyframes as stored (float32 positions), the floor a renderer of them cannot go below
-    keyframe_bytes = sum(c.nbytes if hasattr(c, "nbytes") else c.values.size * 4
-                         for c in [o.curve for o in scene.objects] if c is not None)
+    keyframe_bytes = scene.key_bytes
     cfg = config_of(scene, threads=threads, **({"accel": accel} if accel else {}))
     shading = shading_of(scene)
     renderer = SceneRenderer(scene, cfg, shading)

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import raycore
 from anim.errors import SceneError
+from anim.memory import peak_report
 from anim.scene import AnimatedScene
 from raycore.config import RenderConfig
 from raycore.images.image_io import temp_path, write_exr
@@ -137,6 +138,8 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         # the wall clock of the frames: the warm-up (compile) is reported apart;
         # on a cluster the workers' own warm-ups fall inside it
         wall_s = time.perf_counter() - wall0 - extra["warm_up_s"]
+        if client is None:               # this process's memory (a cluster's workers report none)
+            extra.update(peak_report(scene.faces.shape[0], scene.key_bytes))
         run = {"started": started, "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,

@@ -196,6 +196,9 @@ def merged_stats(previous, scene, cfg, rows, run) -> dict:
     summary = summarize(merged, run["wall_s"], run["compile_s"])
     summary["warm_up_s"] = run.get("warm_up_s", run["compile_s"])
     summary["fps_wall"] = len(rows) / run["wall_s"] if rows and run["wall_s"] > 0 else 0.0
+    for key in ("peak_rss_bytes", "bytes_per_triangle"):        # this run's, when it rendered here
+        if run.get(key) is not None:
+            summary[key] = run[key]
     return {"scene": scene.path.name, "scene_file": str(Path(scene.path).resolve()), "resolution": [cfg.width, cfg.height], **settings_of(cfg),
             "frames": merged, "runs": runs + [run], "summary": summary}
 

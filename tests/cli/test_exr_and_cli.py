@@ -58,6 +58,11 @@ def test_render_writes_frames_and_stats(small_demo, tmp_path):
                 "mrays_per_s", "rays", "triangles"):
         assert key in stats["frames"][0]
     assert set(stats["summary"]) >= {"fps_raycast", "fps_full", "fps_wall", "compile_s"}
+    # this process's peak memory, and per triangle beyond the process before the scene (Linux: /proc)
+    if Path("/proc/self/status").exists():
+        summary = stats["summary"]
+        assert summary["peak_rss_bytes"] > 50 * 1024 ** 2 and summary["bytes_per_triangle"] > 0
+        assert stats["runs"][-1]["peak_rss_bytes"] == summary["peak_rss_bytes"]
     # existing frames are never overwritten unless asked
     again = CliRunner().invoke(main, ["render", str(small_demo), "-o", str(out), "--frames", "2:3", "--quiet"])
     assert again.exit_code == 2 and "frame_0002.exr" in again.output and "--resume" in again.output
