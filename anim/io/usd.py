@@ -166,7 +166,7 @@ class _Mesh:
         placed_by = prim                     # the prim whose transform places the points
         if skinning is not None:
             anim = skinning[0].GetAnimQuery()
-            placed_by = skinning[0].GetSkeleton().GetPrim()
+            placed_by = _skeleton_prim(skinning[0], prim)
             varying |= bool(anim) and (anim.JointTransformsMightBeTimeVarying()
                                        or anim.BlendShapeWeightsMightBeTimeVarying())
         moving_xform = any(UsdGeom.Xformable(p).TransformMightBeTimeVarying()
@@ -234,7 +234,7 @@ class _Mesh:
             xforms = skel_query.ComputeSkinningTransforms(time)
             skin_query.ComputeSkinnedPoints(xforms, points, time)
             # skinned points are in the skeleton's space
-            world = _matrix(xform_cache.GetLocalToWorldTransform(skel_query.GetSkeleton().GetPrim()))
+            world = _matrix(xform_cache.GetLocalToWorldTransform(_skeleton_prim(skel_query, self.prim)))
         elif relative_to is not None:
             world = _matrix(xform_cache.ComputeRelativeTransform(self.prim, relative_to)[0])
         else:
@@ -243,6 +243,24 @@ class _Mesh:
         if self.hides and pxr.UsdGeom.Imageable(self.prim).ComputeVisibility(time) == pxr.UsdGeom.Tokens.invisible:
             pts[:] = pts.mean(axis=0)         # hidden at this time: every triangle degenerate, never hit
         return pts if self.point_of is None else pts[self.point_of]
+
+
+def _skeleton_prim(skel_query, mesh_prim):
+    """The skeleton prim that places a skinned mesh's points: for a mesh
+    inside an instance (an instance proxy), usd-core resolves the binding to
+    the prototype's skeleton, whose transform lacks the instance's; the
+    skeleton's proxy under that instance has it."""
+    skel = skel_query.GetSkeleton().GetPrim()
+    if not (skel.IsInPrototype() and mesh_prim.IsInstanceProxy()):
+        return skel
+    instance = mesh_prim
+    while instance and not instance.IsPseudoRoot():
+        if instance.IsInstance() and skel.GetPath().HasPrefix(instance.GetPrototype().GetPath()):
+            relative = skel.GetPath().MakeRelativePath(instance.GetPrototype().GetPath())
+            proxy = mesh_prim.GetStage().GetPrimAtPath(instance.GetPath().AppendPath(relative))
+            return proxy if proxy else skel
+        instance = instance.GetParent()
+    return skel
 
 
 def _check_unbound_skin(prim, pxr, scene_path, key):
@@ -364,12 +382,14 @@ def _skinning_targets(stage, cache, pxr):
     if _SKINNED.get(key, (None,))[0] is stage:
         return _SKINNED[key][1]
     targets = {}
-    for prim in stage.Traverse():
+    # through instance proxies: a skinned character may be an instanceable reference
+    flags = pxr.Usd.TraverseInstanceProxies(pxr.Usd.PrimDefaultPredicate)
+    for prim in stage.Traverse(flags):
         if not prim.IsA(pxr.UsdSkel.Root):
             continue
         root = pxr.UsdSkel.Root(prim)
-        cache.Populate(root, pxr.Usd.PrimDefaultPredicate)
-        for binding in cache.ComputeSkelBindings(root, pxr.Usd.PrimDefaultPredicate):
+        cache.Populate(root, flags)
+        for binding in cache.ComputeSkelBindings(root, flags):
             skel_query = cache.GetSkelQuery(binding.GetSkeleton())
             if not skel_query:
                 continue

@@ -257,3 +257,28 @@ def test_a_point_instancer_that_would_not_fit_is_refused(tmp_path, monkeypatch):
     res = CliRunner().invoke(main, ["check", str(tmp_path / "pi.usda")])
     assert res.exit_code == 2 and "point instancer /World/PI: 14 instances make" in res.output, res.output
     assert len(res.output.strip().splitlines()) == 1
+
+
+def test_skinned_characters_as_instanceable_references_render_as_plain_ones(tmp_path):
+    """A skinned character (UsdSkel) referenced twice as instanceable prims:
+    its skinning found through the instance proxies, the same depth as the
+    same references without instancing, frame by frame."""
+    from tests.usd_files import skinned_character
+    skinned_character(tmp_path / "char.usda")
+    out = []
+    for instanceable in (True, False):
+        path = tmp_path / f"two_{instanceable}.usda"
+        stage = new_stage(path)
+        cam = UsdGeom.Camera.Define(stage, "/Cam")
+        cam.AddTranslateOp().Set(Gf.Vec3d(1.5, -9, 1))
+        cam.AddRotateXOp().Set(90.0)
+        cam.GetFocalLengthAttr().Set(18.0)
+        for k in range(2):
+            prim = stage.DefinePrim(f"/World/C{k}")                  # typeless: the reference's SkelRoot
+            prim.GetReferences().AddReference("./char.usda", "/Char")
+            UsdGeom.Xformable(prim).AddTranslateOp(opSuffix="place").Set(Gf.Vec3d(3.0 * k, 0, 0))
+            prim.SetInstanceable(instanceable)
+        stage.GetRootLayer().Save()
+        out.append(_depth(path, tmp_path / f"o{instanceable}", "0:6"))
+    _same(out[0], out[1], hits=0.01)
+    assert not np.array_equal(np.isfinite(out[1][0]), np.isfinite(out[1][6]))          # they bend
