@@ -123,11 +123,6 @@ class InstancedPart(Part):
         self.interpolation, self.extrapolate = interpolation, extrapolate
         self.n = len(motion(0.0)[0])
 
-    @property
-    def faces_all(self):
-        m = len(self.vertices)
-        return (self.faces[None] + (np.arange(self.n) * m)[:, None, None]).reshape(-1, 3)
-
     def exact(self, t):
         tr, r, sc = self.motion(t)
         return (np.einsum("nij,nvj->nvi", r, self.vertices[None] * sc[:, None]) + tr[:, None]).reshape(-1, 3)

@@ -16,6 +16,7 @@ import numpy as np
 import pygltflib
 
 from anim.errors import SceneError
+from anim.instances import quaternion_matrices
 from anim.interpolate import wrap_time
 from anim.materials import pbr_material
 from anim.memory import check_copies
@@ -325,9 +326,10 @@ class GltfObject:
             if np.any(norms < 1e-12):
                 self._fail(f"node {index}: EXT_mesh_gpu_instancing ROTATION holds a zero quaternion")
             rot = rot / norms
-        for i in range(n):
-            r = _quat_matrix(rot[i]) if rot is not None else np.eye(3)
-            out[i, :3, :3] = r * (got["SCALE"][i][None, :] if "SCALE" in got else 1.0)
+        if rot is not None:
+            out[:, :3, :3] = quaternion_matrices(rot[:, [3, 0, 1, 2]])        # glTF: x y z w
+        if "SCALE" in got:
+            out[:, :3, :3] *= got["SCALE"][:, None, :]
         if "TRANSLATION" in got:
             out[:, :3, 3] = got["TRANSLATION"]
         return out

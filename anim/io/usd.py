@@ -456,7 +456,9 @@ class UsdObject:
                        if p.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(p) for p in prims]
         self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
-        self.subdivided = [m.path for m in self.meshes for m in [b[0] for b in getattr(m, "blocks", ())] or [m]
+        # a point instancer's meshes are its blocks' prototype meshes
+        meshes = [b[0] for m in self.meshes for b in getattr(m, "blocks", [(m,)])]
+        self.subdivided = [m.path for m in meshes
                            if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
         offsets = np.cumsum([0] + [m.n_vertices for m in self.meshes])
         self.offsets = offsets

@@ -142,7 +142,7 @@ def bench_peer(peer, path: Path, name: str, res: int, n_frames: int, threads: in
             agree = float(np.mean(np.isfinite(depth) == np.isfinite(reference_z)))
         if i > 0:
             rows.append({"interp_ms": interp_ms, **timings, "write_ms": 0.0, "tri_tests": 0})
-    own = hasattr(peer, "build_instanced") and instanced_parts(scene, scene.time_of(frames[0])) is not None
+    own = hasattr(peer, "build_instanced") and any(o.instances is not None for o in scene.objects)
     row = {**_row(name, peer.name + (" (instances)" if own else ""), 0, threads, scene, res, rows), "peer": True}
     if reference_z is not None:
         row["hit_agreement"] = agree

@@ -124,10 +124,11 @@ class Mitsuba:
         if threads:
             dr.set_thread_count(threads)
         self.mi, self.dr, self.scene, self.shape = mi, dr, None, None
+        self.instanced = False          # the scene built by build_instanced, not build
 
     def build(self, vertices, faces):
         mi = self.mi
-        if self.scene is None or self.shape != (len(vertices), len(faces)) or getattr(self, "instanced", False):
+        if self.scene is None or self.shape != (len(vertices), len(faces)) or self.instanced:
             self.instanced = False
             mesh = mi.Mesh("mesh", len(vertices), len(faces))
             params = mi.traverse(mesh)
@@ -184,7 +185,7 @@ class Mitsuba:
 
     def closest(self, o, d):
         pi = self.scene.ray_intersect_preliminary(self._ray(o, d))
-        if not getattr(self, "instanced", False):
+        if not self.instanced:
             self.dr.eval(pi.t, pi.prim_index)
             t = np.array(pi.t)
             prim = np.array(pi.prim_index).astype(np.int64)

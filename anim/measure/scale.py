@@ -77,14 +77,6 @@ objects:
     return folder / "anim.yaml"
 
 
-def _peak_rss_bytes():
-    return status_bytes("VmHWM")
-
-
-def _rss_bytes():
-    return status_bytes("VmRSS")
-
-
 def measure_frustrace(path, n_frames, threads, accel):
     """One size in this process: medians per phase over n_frames frames after
     the warm-up, frame 0's build, the warm-up's seconds, peak RSS."""
@@ -95,7 +87,7 @@ def measure_frustrace(path, n_frames, threads, accel):
     from anim.scene import AnimatedScene
     from raycore.jit.presets import set_threads
     set_threads(threads)
-    base = _rss_bytes()                         # the interpreter, numba, the libraries
+    base = status_bytes("VmRSS")                # the interpreter, numba, the libraries
     scene = AnimatedScene(path)
     # the keyframes as stored (float32 positions), the floor a renderer of them cannot go below
     keyframe_bytes = scene.key_bytes
@@ -110,7 +102,7 @@ def measure_frustrace(path, n_frames, threads, accel):
         interp_ms, result = renderer.render(scene.time_of(frame))
         rows.append({"interp_ms": interp_ms, **result.timings})
     n = int(scene.faces.shape[0])
-    peak = _peak_rss_bytes()
+    peak = status_bytes("VmHWM")
     return {"triangles": n, **{k: median_ms(rows, k) for k in PHASES},
             "frame_ms": median_ms(rows, *PHASES), "warm_up_s": warm_s, "accel": cfg.accel,
             "peak_rss_gb": peak / 1024 ** 3, "base_rss_gb": base / 1024 ** 3, "keyframe_bytes": keyframe_bytes,
