@@ -26,27 +26,55 @@ from anim.interpolate import wrap_time
 from anim.io.polygons import split_at_seams, triangulate
 from anim.materials import pbr_material
 
-_WORKERS = []
+_OPEN = {}        # resolved path -> (mtime, worker process, its "open" answer): one read per file and change
 
 
 def _stop_workers():
-    for w in _WORKERS:
-        w.close()
+    for _, proc, _ in _OPEN.values():
+        _close(proc)
 
 
 atexit.register(_stop_workers)
 
 
-class FbxWorker:
-    """The worker process of one FBX file."""
+def open_fbx(path, scene_path, key):
+    """(FbxWorker, what the file holds) for an FBX file, its process started
+    and the file read once per file and change (a whole-file render reads
+    it for the scene's camera and lights, then for its meshes)."""
+    resolved = str(Path(path).resolve())
+    mtime = Path(path).stat().st_mtime_ns
+    cached = _OPEN.get(resolved)
+    if cached is not None and cached[0] == mtime and cached[1].poll() is None:
+        return FbxWorker(cached[1], path, scene_path, key), cached[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [_package_root(), os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, "-m", "anim.io.fbx_worker"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
+    worker = FbxWorker(proc, path, scene_path, key)
+    try:
+        info = worker.call("open", resolved)
+    except SceneError:
+        _close(proc)
+        raise
+    if cached is not None:
+        _close(cached[1])
+    _OPEN[resolved] = (mtime, proc, info)
+    return worker, info
 
-    def __init__(self, path, scene_path, key):
-        self.path, self.scene_path, self.key = path, scene_path, key
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [_package_root(),
-                                                                         os.environ.get("PYTHONPATH")]))}
-        self.proc = subprocess.Popen([sys.executable, "-m", "anim.io.fbx_worker"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
-        _WORKERS.append(self)
+
+def _close(proc):
+    if proc.poll() is None:
+        try:
+            proc.stdin.close()
+            proc.wait(timeout=5)
+        except (OSError, subprocess.TimeoutExpired):
+            proc.kill()
+
+
+class FbxWorker:
+    """An FBX file's worker process, as one scene key asks it (its errors name that key)."""
+
+    def __init__(self, proc, path, scene_path, key):
+        self.proc, self.path, self.scene_path, self.key = proc, path, scene_path, key
 
     def call(self, op, *args):
         """The worker's answer to (op, args); SceneError (exit 2) if it fails or dies."""
@@ -71,14 +99,6 @@ class FbxWorker:
     def _name(self):
         """The file's name to start a message with, unless the error already names it."""
         return "" if Path(self.scene_path) == Path(self.path) else f"{Path(self.path).name}: "
-
-    def close(self):
-        if self.proc.poll() is None:
-            try:
-                self.proc.stdin.close()
-                self.proc.wait(timeout=5)
-            except (OSError, subprocess.TimeoutExpired):
-                self.proc.kill()
 
 
 def take_of(drivers, takes, allowed):
@@ -114,8 +134,7 @@ class FbxObject:
         warnings = warnings if warnings is not None else []
         if not path.is_file():
             raise SceneError(scene_path, key, f"mesh file not found: {path}")
-        self.worker = FbxWorker(path, scene_path, key)
-        info = self.worker.call("open", str(path))
+        self.worker, info = open_fbx(path, scene_path, key)
         parts = info["parts"]
         if not parts:
             raise SceneError(scene_path, key, f"{path.name}: the file has no mesh")

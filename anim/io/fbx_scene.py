@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from anim.errors import SceneError
-from anim.io.fbx import FbxWorker, take_of
+from anim.io.fbx import open_fbx, take_of
 
 DEFAULT_WIDTH = 512
 
@@ -117,36 +117,32 @@ def scene_of_fbx(path, camera=None):
     path = Path(path)
     if not path.is_file():
         raise SceneError(path, "", "file not found")
-    worker = FbxWorker(path, path, "")
-    try:
-        info = worker.call("open", str(path))
-        if not info["parts"]:
-            raise SceneError(path, "", "the file has no mesh")
-        fps = info["fps"] if info["fps"] > 0 else 24.0
-        notes = ["FBX file: read Y up in metres"]
-        takes = info["takes"]
-        played = sorted({k for part in info["parts"]
-                         for k in [take_of(part["drivers"], takes, range(len(takes)))[0]] if k is not None})
-        start, end = _frames(takes, played, fps, notes)
-        cam, res = _camera(worker, info, camera, start, end, fps, path, notes)
-        rest = np.concatenate([np.asarray(p["rest"]).reshape(-1, 3) for p in info["parts"]])
-        lo, hi = rest.min(axis=0), rest.max(axis=0)
-        if cam is None:
-            centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
-            cam = {"eye": _vec(centre + [0, 0, 1.6 * size]), "look_at": _vec(centre), "up": [0.0, 1.0, 0.0],
-                   "fov": 40.0}
-            res = [DEFAULT_WIDTH, DEFAULT_WIDTH]
-            notes.append("no camera in the file: frustrace's default view of the meshes' bounds")
-        lights = _lights(worker, info, start / fps, notes)
-        if lights:
-            notes.append(f"{len(lights)} light(s) from the file")
-        else:
-            eye = np.array(cam["eye"] if "eye" in cam else cam["keys"][0]["eye"])
-            d2 = float(np.sum(((lo + hi) / 2 - eye) ** 2)) or 1.0
-            lights = [{"type": "point", "position": _vec(eye), "intensity": d2}]
-            notes.append("no lights in the file: a point light at the camera")
-    finally:
-        worker.close()
+    worker, info = open_fbx(path, path, "")
+    if not info["parts"]:
+        raise SceneError(path, "", "the file has no mesh")
+    fps = info["fps"] if info["fps"] > 0 else 24.0
+    notes = ["FBX file: read Y up in metres"]
+    takes = info["takes"]
+    played = sorted({k for part in info["parts"]
+                     for k in [take_of(part["drivers"], takes, range(len(takes)))[0]] if k is not None})
+    start, end = _frames(takes, played, fps, notes)
+    cam, res = _camera(worker, info, camera, start, end, fps, path, notes)
+    rest = np.concatenate([np.asarray(p["rest"]).reshape(-1, 3) for p in info["parts"]])
+    lo, hi = rest.min(axis=0), rest.max(axis=0)
+    if cam is None:
+        centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
+        cam = {"eye": _vec(centre + [0, 0, 1.6 * size]), "look_at": _vec(centre), "up": [0.0, 1.0, 0.0],
+               "fov": 40.0}
+        res = [DEFAULT_WIDTH, DEFAULT_WIDTH]
+        notes.append("no camera in the file: frustrace's default view of the meshes' bounds")
+    lights = _lights(worker, info, start / fps, notes)
+    if lights:
+        notes.append(f"{len(lights)} light(s) from the file")
+    else:
+        eye = np.array(cam["eye"] if "eye" in cam else cam["keys"][0]["eye"])
+        d2 = float(np.sum(((lo + hi) / 2 - eye) ** 2)) or 1.0
+        lights = [{"type": "point", "position": _vec(eye), "intensity": d2}]
+        notes.append("no lights in the file: a point light at the camera")
     objects = [{"name": path.stem, "mesh": path.name, **({"animation": "all"} if takes else {})}]
     data = {"version": 1, "frames": {"start": start, "end": end, "fps": float(fps)},
             "output": {"resolution": res}, "camera": cam, "lights": lights, "objects": objects}

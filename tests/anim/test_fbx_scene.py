@@ -150,3 +150,17 @@ def test_a_missing_camera_a_missing_file_or_a_cut_file_is_one_line_and_exit_2(tm
             res = CliRunner().invoke(main, [command, *args])
             assert res.exit_code == 2 and words in res.output, res.output
             assert len(res.output.strip().splitlines()) == 1
+
+
+def test_a_whole_file_is_read_once(tmp_path, monkeypatch):
+    """The scene's camera and lights and its meshes come from one worker
+    process, which reads the file once (anim/io/fbx.open_fbx)."""
+    import subprocess
+    from anim.scene import AnimatedScene
+    _copy(tmp_path)
+    started = []
+    real = subprocess.Popen
+    monkeypatch.setattr(subprocess, "Popen", lambda *a, **k: started.append(a[0]) or real(*a, **k))
+    scene = AnimatedScene(tmp_path / "shot.fbx")
+    assert sum("anim.io.fbx_worker" in c for c in started) == 1
+    assert np.isfinite(scene.vertices_at(scene.time_of(5))).all()
