@@ -29,6 +29,12 @@ from anim.io.usd import dependencies as usd_dependencies
 from anim.tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from anim.vertex_kernels import instances_into, skin_into, transform_into
 
+# render.instancing: auto traces an object's instances two-level (its
+# prototype's tree under a top level, raycore/instancing) from this many
+# copied triangles on, and copies them into the frame's triangles below
+# (docs/performance.md, instancing: the flat copies are faster while small)
+TWO_LEVEL_TRIANGLES = 1_000_000
+
 
 def _key_path(loc):
     return ".".join(str(p) for p in loc)
@@ -116,7 +122,8 @@ class SceneObject:
     with a skeleton (skinning), a glTF file, or a mesh with a TRS transform
     (one matrix per frame)."""
 
-    def __init__(self, spec, scene_path, index, warnings):
+    def __init__(self, spec, scene_path, index, warnings, instancing="flatten"):
+        """instancing: how an instance table's copies are made (render.instancing)."""
         base = Path(scene_path).parent
         key = f"objects.{index}"
         owner = f"object {spec.name!r}"
@@ -163,14 +170,23 @@ class SceneObject:
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
         self.n_vertices = len(self.base)
         self.instances = None
+        self.two_level = False
+        self.proto_static = self.static
         if spec.instances is not None:
-            self._instance(spec, base, scene_path, key, owner)
+            self._instance(spec, base, scene_path, key, owner, instancing)
 
-    def _instance(self, spec, base, scene_path, key, owner):
+    def _instance(self, spec, base, scene_path, key, owner, instancing):
         """Copies of this object by an instance table (anim/instances.py):
-        the faces (and UVs) repeated a copy after another; the object as
-        written becomes the prototype, placed into a buffer of its own."""
+        the faces (and UVs) repeated a copy after another, the object as
+        written becoming the prototype, placed into a buffer of its own; or,
+        two-level (render.instancing), the prototype alone among the
+        frame's triangles and the copies as its instances (instances_at)."""
         table = InstanceTable(spec.instances, base, scene_path, f"{key}.instances", owner, spec.extrapolate)
+        copied = table.n * len(self.faces)
+        if instancing == "two_level" or (instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES):
+            self.instances, self.two_level = table, True
+            self.static = self.static and table.constant
+            return
         nv = len(self.base)
         check_copies(table.n * len(self.faces), f"{table.n:,} copies of {len(self.faces):,} triangles", scene_path,
                      f"{key}.instances")
@@ -250,8 +266,9 @@ class SceneObject:
                                           for c in curves)
 
     def place(self, t, out):
-        """Write the positions at time t into out (n_v, 3) f32."""
-        if self.instances is None:
+        """Write the positions at time t into out (n_v, 3) f32 (a two-level
+        object's: its prototype's)."""
+        if self.instances is None or self.two_level:
             self._place_one(t, out)
             return
         self._place_one(t, self._proto)
@@ -279,9 +296,10 @@ class SceneObject:
 class AnimatedScene:
     """Loads and checks a scene file; evaluates geometry and camera at time t."""
 
-    def __init__(self, path, camera=None):
+    def __init__(self, path, camera=None, instancing=None):
         """camera: for a USD stage, the path of the camera prim to render
-        through (default: its first camera)."""
+        through (default: its first camera). instancing: render.instancing's
+        choice instead of the file's."""
         self.path = Path(path)
         self.camera_choice = camera
         self.notes = []            # what a USD stage gave and what came from defaults (`check`)
@@ -315,14 +333,14 @@ class AnimatedScene:
         for i, o in enumerate(spec.objects):
             if o.material is not None and o.material not in spec.materials:
                 raise SceneError(self.path, f"objects.{i}.material", f"unknown material {o.material!r}")
-            obj = SceneObject(o, self.path, i, self.warnings)
+            obj = SceneObject(o, self.path, i, self.warnings, instancing or spec.render.instancing)
             obj.offset = offset
             obj.face_offset = sum(len(f) for f in faces)
             mat = self.material_names.index(o.material) if o.material else default_material
             if obj.file is not None and o.material is None and obj.file.materials:
                 # the file's own materials, per primitive; `material:` overrides them all
                 face_mat = self._file_materials(obj.file, i, default_material)
-                if obj.instances is not None:                 # the prototype's, per copy
+                if obj.instances is not None and not obj.two_level:     # the prototype's, per copy
                     face_mat = np.tile(face_mat, obj.instances.n)
                 textured = any(self.materials[m]["texture_index"] >= 0 for m in np.unique(face_mat))
             else:
@@ -348,6 +366,8 @@ class AnimatedScene:
                 self.notes.append(f"{len(plain)} mesh(es) without a UsdPreviewSurface material get frustrace's "
                                   f"default material (first: {plain[0]})")
         self.n_vertices = offset
+        self.two_level = [o for o in self.objects if o.two_level]
+        self._instance_layout()
         self.faces = np.ascontiguousarray(np.concatenate(faces) if faces else np.zeros((0, 3), np.int32), np.int32)
         self.tri_material = np.concatenate(mats) if mats else np.zeros(0, np.int32)
         # UVs only when some textured material has them: no UV work otherwise
@@ -528,6 +548,44 @@ class AnimatedScene:
             if span is not None:
                 ranges[f"objects.{i}.mesh"] = span
         return ranges
+
+    def _instance_layout(self):
+        """The two-level objects' prototypes and instance ids: each copy's
+        triangles numbered as the flattened world would number them (the
+        `id` AOV), every other triangle shifted by the copies before it."""
+        n_t = sum(len(o.faces) for o in self.objects)
+        self.tri_shift = np.zeros(n_t, np.int64)
+        self.id_base, flat = [], 0
+        for o in self.objects:
+            n = len(o.faces)
+            if o.two_level:
+                self.id_base.append(flat + np.arange(o.instances.n, dtype=np.int64) * n - o.face_offset)
+                flat += o.instances.n * n
+            else:
+                self.tri_shift[o.face_offset:o.face_offset + n] = flat - o.face_offset
+                flat += n
+        self.flat_triangles = flat
+        self.proto_ranges = np.array([[o.face_offset, o.face_offset + len(o.faces)] for o in self.two_level],
+                                     np.int64).reshape(-1, 2)
+        self.proto_moving = np.array([not o.proto_static for o in self.two_level], bool)
+        self.instance_proto = np.concatenate([np.full(o.instances.n, p, np.int32)
+                                              for p, o in enumerate(self.two_level)] or [np.zeros(0, np.int32)])
+        self.id_base = np.concatenate(self.id_base or [np.zeros(0, np.int64)])
+
+    def instances_at(self, t):
+        """The two-level objects' instances at time t (raycore/instancing/world.InstanceFrame), or None."""
+        if not self.two_level:
+            return None
+        from raycore.instancing.world import InstanceFrame
+        matrices = np.concatenate([o.instances.matrices(t) for o in self.two_level])
+        return InstanceFrame(self.proto_ranges, self.proto_moving, self.instance_proto, matrices,
+                             np.full(len(matrices), -1, np.int32), self.id_base, self.tri_shift)
+
+    @property
+    def world_ranges(self):
+        """(first, end) triangle ranges of the moving objects that are not
+        two-level prototypes (one tree each in an instanced world)."""
+        return [(o.face_offset, o.face_offset + len(o.faces)) for o in self.moving if not o.two_level]
 
     @property
     def key_bytes(self):

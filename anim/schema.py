@@ -135,6 +135,11 @@ class Render(Strict):
     # is above it; 0 = off (raycore/adaptive.py)
     max_error: Annotated[float, Field(ge=0, le=1)] = 0.0
     motion_blur: MotionBlur = MotionBlur()
+    # objects with `instances:`: copied into the frame's triangles (flatten),
+    # or traced as a prototype's tree per instance under a top level
+    # (two_level, raycore/instancing); auto = two_level from
+    # anim.scene.TWO_LEVEL_TRIANGLES copied triangles on
+    instancing: Literal["auto", "flatten", "two_level"] = "auto"
 
     @field_validator("packet")
     @classmethod

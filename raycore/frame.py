@@ -21,6 +21,8 @@ from raycore.jit.counters import Counters
 from raycore.jit.thread_pool import on_threads
 from raycore.jit.tile_queue import new_queue
 from raycore.jit.workspace import Workspace
+from raycore.instancing.seen import SeenTriangles
+from raycore.instancing.world import InstancedStructures
 from raycore.pass_scene import PassScene
 from raycore.shading.aovs import NearestAOVs
 from raycore.shading.shade import shade_samples, write_pixels
@@ -39,6 +41,7 @@ class Geometry(NamedTuple):
     uvs: np.ndarray           # (n_v, 2) f32, or (0, 2) when untextured
     vf_start: np.ndarray      # vertex -> faces CSR (see mesh.vertex_face_csr)
     vf_faces: np.ndarray
+    instances: object = None  # instancing/world.InstanceFrame: copies of prototypes among the triangles
 
 
 class Shading(NamedTuple):
@@ -80,6 +83,13 @@ class FrameBuffers:
         self.work = Workspace()
         self.images = [None] * max(1, n_images)
         self.next_image = 0
+        self.seen = None
+
+    def seen_triangles(self, n_pix, textured):
+        """The work arrays of an instanced world's seen triangles (instancing/seen.py)."""
+        if self.seen is None or self.seen.prim.shape[0] < n_pix or (textured and self.seen.uvs.shape[0] == 0):
+            self.seen = SeenTriangles(n_pix, textured)
+        return self.seen
 
     def image(self):
         """The next (rgba (H*W, 4), z (H*W,)) f32 pair of the ring."""
@@ -133,12 +143,14 @@ def lit_rows(lights) -> list:
     return [li for li in range(lights.shape[0]) if np.any(lights[li, 4:7] > 0)]
 
 
-def sweeps_in_one(cfg: RenderConfig, lights, n_faces: int) -> bool:
+def sweeps_in_one(cfg: RenderConfig, lights, n_faces: int, instanced=False) -> bool:
     """Whether a frame's camera passes go to pixels in one sweep (sweep.py):
-    no AOVs, and no shadows, or BVH shadows whose every ray is traced for
-    every sample (no area light's emitters waiting for its probes). Else
-    each pass goes phase by phase (gather, shadows, shading, pixels)."""
-    if cfg.aovs:
+    no AOVs, no instances (whose seen triangles are placed between the
+    trace and the gather), and no shadows, or BVH shadows whose every ray
+    is traced for every sample (no area light's emitters waiting for its
+    probes). Else each pass goes phase by phase (gather, shadows, shading,
+    pixels)."""
+    if cfg.aovs or instanced:
         return False
     lit = lit_rows(lights)
     if not (cfg.shadows and lit and n_faces > 0):
@@ -193,7 +205,10 @@ class FrameRender:
         self.counters = {"rays": 0, "shadow_rays": 0, "shadow_rays_skipped": 0, "lights_skipped": 0,
                          "tri_tests": 0, "cells": 0, "fallback_rays": 0,
                          "primary_packets": 0, "primary_visits": 0, "primary_tests": 0, "builds": 0, "passes": 0}
-        if structures is None:
+        if structures is None and geom.instances is not None:
+            structures = InstancedStructures(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces,
+                                             geom.instances)
+        elif structures is None:
             structures = FrameStructures(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces,
                                          cfg.grid_density)
         self.lit = lit_rows(shading.lights)
@@ -212,7 +227,7 @@ class FrameRender:
         self.groups = ([(rows, probe_rows(rows, cfg.light_probes)) for rows in light_groups(shading.lights, self.lit)]
                        if self.cast_shadows else [])
         self.first_rows = [li for _, probes in self.groups for li in probes]
-        self.one_sweep = sweeps_in_one(cfg, shading.lights, geom.faces.shape[0])
+        self.one_sweep = sweeps_in_one(cfg, shading.lights, geom.faces.shape[0], geom.instances is not None)
 
     def run(self) -> FrameResult:
         cfg, W, H = self.cfg, self.cfg.width, self.cfg.height
@@ -271,7 +286,7 @@ class FrameRender:
                 self.count_shadow_rays(Counters.of(sweep.counters), sweep.shadow_rays, len(self.first_rows),
                                        sweep.samples)
             return
-        surface = self.gather(jitter, hits.t, hits.prim, hits.b1, hits.b2, layout)
+        surface = self.gather(jitter, hits.t, hits.prim, hits.b1, hits.b2, layout, hits.inst)
         rgb = self.shade_surface(surface)
         t0 = time.perf_counter()
         write_pixels(surface.pixel, rgb, surface.depth, self.bg, np.float32(weight), accumulate, rgba, z)
@@ -291,14 +306,26 @@ class FrameRender:
         counters["tri_tests"] += c.tests
         counters["cells"] += c.visits
 
-    def gather(self, jitter, t, prim, b1, b2, layout):
-        """The visible surface of one pass of camera hits (timed as shading)."""
+    def gather(self, jitter, t, prim, b1, b2, layout, inst=None):
+        """The visible surface of one pass of camera hits (timed as shading);
+        in an instanced world (inst: the hits' instances) from the seen
+        triangles placed in the world (instancing/seen.py), its prim the
+        primitives' ids in the flattened world."""
         scene, geom, shading = self.scene, self.geom, self.shading
         t0 = time.perf_counter()
         normals = scene.normals_for(prim)
-        surface = visible_surface(scene.cam, jitter, t, prim, b1, b2, *layout, scene.tri_verts, geom.faces,
-                                  normals, geom.tri_material, shading.materials, geom.uvs, shading.tex_data,
+        tri_verts, faces, tri_material, uvs = scene.tri_verts, geom.faces, geom.tri_material, geom.uvs
+        seen = None
+        if inst is not None:
+            seen = self.buffers.seen_triangles(prim.shape[0], uvs.shape[0] > 0)
+            prim, tri_verts, faces, normals, tri_material, uvs = seen.place(
+                prim, inst, tri_verts, faces, normals, uvs, tri_material, scene.geom.instances.tri_shift,
+                scene.accel.place)
+        surface = visible_surface(scene.cam, jitter, t, prim, b1, b2, *layout, tri_verts, faces,
+                                  normals, tri_material, shading.materials, uvs, shading.tex_data,
                                   shading.tex_info, self.buffers.work)
+        if seen is not None:
+            surface.prim[:] = seen.ids[surface.prim]
         self.timings["shade_ms"] += (time.perf_counter() - t0) * 1e3
         return surface
 
@@ -377,6 +404,8 @@ class FrameRender:
         full_b2 = buffers.work.take("adaptive.b2", (n_pix,))
         full_prim = buffers.work.take("adaptive.prim", (n_pix,), np.int32)
         full_prim.fill(-1)
+        full_inst = buffers.work.take("adaptive.inst", (n_pix,), np.int32) if self.geom.instances is not None \
+            else None
         layout = row_major_offsets(W, H)
         centre = plain_times_lens(1)[0]             # the 1-spp image's time and lens (the border ring's too)
 
@@ -398,7 +427,9 @@ class FrameRender:
                 full_prim[pixels] = hits.prim[j::g]
                 full_b1[pixels] = hits.b1[j::g]
                 full_b2[pixels] = hits.b2[j::g]
-                surface = self.gather(offset, full_t, full_prim, full_b1, full_b2, layout)
+                if full_inst is not None:
+                    full_inst[pixels] = hits.inst[j::g]
+                surface = self.gather(offset, full_t, full_prim, full_b1, full_b2, layout, full_inst)
                 full_prim[pixels] = -1
                 if aovs is not None and aov:
                     aovs.add(surface)

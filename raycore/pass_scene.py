@@ -27,8 +27,13 @@ class PassScene:
         if motion is None:                   # else the first pass's move_to builds
             self.build(geom.vertices, pose)
 
-    def build(self, vertices, pose):
+    def build(self, vertices, pose, instances=None):
+        """The structures over these vertices (and, in an instanced world,
+        these instances: instancing/world.InstanceFrame), when they changed."""
         cfg, t0 = self.cfg, time.perf_counter()
+        if instances is not None and instances is not self.geom.instances:
+            self.geom = self.geom._replace(instances=instances)
+            self.built_vertices = None
         if self.built_vertices is None or not np.array_equal(vertices, self.built_vertices):
             geom = self.geom._replace(vertices=vertices)
             self.tri_verts, built = self.structures.build(self.names, geom, self.cfg, self.buffers,
@@ -65,7 +70,8 @@ class PassScene:
     def move_to(self, sample):
         """Structures and camera of a pass at (time, lens_x, lens_y): time in
         [0, 1] across the shutter (motion(time) gives the vertices and the
-        camera pose), lens on the unit disc."""
+        camera pose, and in an instanced world the instances), lens on the
+        unit disc."""
         if sample == self.key:
             return
         self.key = sample

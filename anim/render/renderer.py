@@ -11,6 +11,7 @@ from raycore.config import RenderConfig
 from raycore.geometry.camera import camera_basis
 from raycore.frame import CameraPose, FrameBuffers, Geometry, Shading, render_frame
 from raycore.geometry.mesh import vertex_face_csr
+from raycore.instancing.world import InstancedStructures
 from raycore.structures import FrameStructures
 
 
@@ -29,9 +30,22 @@ class SceneRenderer:
         # write in flight (pending_writes: how many frames may still be writing)
         self.buffers = FrameBuffers(cfg.width, cfg.height, shading.lights.shape[0], cfg.packet,
                                     n_images=pending_writes + 2)
-        # static objects: gathered, binned and given normals once (raycore/grid/incremental.py)
-        self.structures = structures or FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
-                                                        scene.moving_triangles, scene.moving_object_ranges)
+        # static objects: gathered, binned and given normals once (raycore/grid/incremental.py);
+        # instances: the prototypes' trees under a top level (raycore/instancing)
+        if structures is not None:
+            self.structures = structures
+        elif scene.two_level:
+            self.structures = InstancedStructures(scene.faces, scene.n_vertices, *self.vf,
+                                                  scene.instances_at(scene.time_of(scene.frame_numbers[0])),
+                                                  scene.world_ranges)
+        else:
+            self.structures = FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
+                                              scene.moving_triangles, scene.moving_object_ranges)
+
+    def geometry(self, t, vertices):
+        """The frame's Geometry at time t over these vertices."""
+        scene = self.scene
+        return Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf, scene.instances_at(t))
 
     def render(self, t):
         """(interp_ms, FrameResult) of the frame at time t."""
@@ -40,7 +54,7 @@ class SceneRenderer:
         vertices = scene.vertices_at(t)
         pose = CameraPose(*scene.camera_at(t))
         interp_ms = (time.perf_counter() - t0) * 1e3
-        geom = Geometry(vertices, scene.faces, scene.tri_material, scene.uvs, *self.vf)
+        geom = self.geometry(t, vertices)
         motion = self.shutter(t)
         result = render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.structures, motion=motion)
         return interp_ms + (motion.interp_ms if motion else 0.0), result
@@ -57,8 +71,7 @@ class SceneRenderer:
         """Interpolate, build the structures (the camera rays' and, with
         shadow_structure, the shadow rays') and trace the camera rays, and
         nothing more: what warm_up compiles here while a helper compiles the rest."""
-        vertices = self.scene.vertices_at(t)
-        geom = Geometry(vertices, self.scene.faces, self.scene.tri_material, self.scene.uvs, *self.vf)
+        geom = self.geometry(t, self.scene.vertices_at(t))
         names = {self.cfg.accel}
         if shadow_structure and self.cfg.shadows and self.shading.lights.shape[0] > 0:
             names.add(self.cfg.shadow_structure)
@@ -70,7 +83,7 @@ class SceneRenderer:
 
 class Shutter:
     """u in [0, 1] across the shutter -> (vertices, CameraPose) at that
-    time: the shutter is open for `length` seconds, centred on the frame
+    time (and the instances, in an instanced world): the shutter is open for `length` seconds, centred on the frame
     time t, opening at it (start), or closing at it (end). Interpolation
     time is summed in interp_ms."""
     OPENS = {"center": -0.5, "start": 0.0, "end": -1.0}
@@ -90,6 +103,8 @@ class Shutter:
         t0 = time.perf_counter()
         t = self.time_of(u)
         out = self.scene.vertices_at(t, self.held), CameraPose(*self.scene.camera_at(t))
+        if self.scene.two_level:
+            out += (self.scene.instances_at(t),)
         self.interp_ms += (time.perf_counter() - t0) * 1e3
         return out
 

@@ -45,7 +45,15 @@ def config_of(scene: AnimatedScene, **overrides) -> RenderConfig:
                 shutter_position=spec.render.motion_blur.position,
                 aperture_radius=spec.camera.aperture_radius, focus_distance=spec.camera.focus_distance or 0.0)
     base.update({k: v for k, v in overrides.items() if v is not None})
-    if base["accel"] == "auto":
+    if scene.two_level:
+        # one structure serves every ray: the prototypes' trees under a top level
+        asked = base["accel"]
+        base["accel"], base["shadow_accel"] = "bvh", "bvh"
+        base["accel_choice"] = (f"two-level BVH: {len(scene.instance_proto):,} instances of "
+                                f"{len(scene.two_level)} prototype(s), {scene.flat_triangles:,} triangles flattened"
+                                + (f" (accel {asked} does not trace instances)" if asked not in ("auto", "bvh")
+                                   else ""))
+    elif base["accel"] == "auto":
         moving = scene.moving_triangles
         n = int(scene.faces.shape[0])
         base["accel"], base["accel_choice"] = auto_accel(n, n if moving is None else len(moving),

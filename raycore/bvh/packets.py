@@ -356,8 +356,10 @@ def _push_children(stack, top, left, left_first, mask, hint):
 
 @flat_kernel
 def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack, counters,
-                row):
-    """Closest (or any) hits of packet rays 0..n-1 in `bvh`: on entry
+                row, root):
+    """Closest (or any) hits of packet rays 0..n-1 in the tree of `bvh`
+    under node `root` (0: the whole; another: one instanced prototype's
+    tree, raycore/instancing): on entry
     h_t holds each ray's t_max (-inf: no ray) and prim -1; on return
     prim >= 0 marks a hit (a reference), with t in h_t (closest hit; any
     hit: -inf) and barycentrics in h_b1, h_b2. mode SHARED_ORIGIN: every ray
@@ -396,14 +398,14 @@ def walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia,
     # the largest |coordinate| of the tree's root box bounds the rounding of every plane test
     big = F0
     for q in range(6):
-        big = max(big, abs(box[0, q]))
+        big = max(big, abs(box[root, q]))
     n_planes = packet_frustum(ray, h_t, n, mode, kx, ky, kz, big, planes)
     if n_planes == 0:
         packet_bounds(ray, h_t, n, ia)
     n_visits = 0
     n_tests = 0
     n_leaves = 0
-    stack[0] = (1 << ((n + LANES - 1) // LANES)) - 1        # the root, every chunk
+    stack[0] = (root << NODE_SHIFT) | ((1 << ((n + LANES - 1) // LANES)) - 1)        # the root, every chunk
     top = 1
     while top > 0:
         top -= 1
@@ -519,9 +521,10 @@ def packet_axes(ray, h_t, n):
 
 
 @flat_kernel
-def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, counters, row):
-    """One ray, Woop test with its own shear: (t, ref, b1, b2), ref -1 on a
-    miss (t_max then). The reference the packets are checked against."""
+def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, counters, row, root):
+    """One ray through the tree under node `root`, Woop test with its own
+    shear: (t, ref, b1, b2), ref -1 on a miss (t_max then). The reference
+    the packets are checked against."""
     box, node_i, tri, verts = bvh
     o = (ox, oy, oz)
     d = (dx, dy, dz)
@@ -531,7 +534,7 @@ def trace_single(bvh, ox, oy, oz, dx, dy, dz, t_min, t_max, any_hit, stack, coun
     s_x = d[kx] * s_z
     s_y = d[ky] * s_z
     best_t, best_k, best_b1, best_b2 = t_max, -1, F0, F0
-    stack[0] = 0
+    stack[0] = root
     top = 1
     while top > 0:
         top -= 1

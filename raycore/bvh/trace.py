@@ -33,13 +33,13 @@ def _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, i
     if mode != SINGLE:
         set_inverse(ray, n)
         if walk_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
-                       counters, row):
+                       counters, row, np.int64(0)):
             return
     for r in range(n):
         if not h_t[r] >= ray[TMIN, r]:
             continue
         t, k, b1, b2 = trace_single(bvh, ray[OX, r], ray[OY, r], ray[OZ, r], ray[DX, r], ray[DY, r],
-                                    ray[DZ, r], ray[TMIN, r], h_t[r], any_hit, stack, counters, row)
+                                    ray[DZ, r], ray[TMIN, r], h_t[r], any_hit, stack, counters, row, np.int64(0))
         h_t[r], prim[r], h_b1[r], h_b2[r] = (-INF if (vis_only and k >= 0) else t), k, b1, b2
         counters[row, FALLBACK_RAYS] += 1
     counters[row, PACKETS] += 1
@@ -223,6 +223,29 @@ def block_lights_entry(bvh, lights, rows, counters) -> int:
                         np.float32(0), vis, counters, np.int64(0), *packet, live)
 
 
+@helper
+def load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx, jy, side):
+    """The camera rays of the side x side pixels from (x0, y0) into a
+    packet, row by row; pixels past the image's edge repeat the last
+    column or row as dead rays. Returns the packet's size."""
+    n = np.int64(0)             # not a literal 0 (jit/presets.py: "Literal arguments")
+    for yy in range(side):
+        for xx in range(side):
+            x = min(x0 + xx, width - 1)
+            y = min(y0 + yy, height - 1)
+            d = primary_dir(cam, x, y, jx, jy)
+            ray[OX, n], ray[OY, n], ray[OZ, n] = cam[0], cam[1], cam[2]
+            ray[DX, n], ray[DY, n], ray[DZ, n] = d[0], d[1], d[2]
+            ray[TMIN, n] = F0
+            # pixels past the image's edge repeat the last column/row: dead rays
+            h_t[n] = INF if (x0 + xx < width and y0 + yy < height) else -INF
+            h_b1[n] = F0
+            h_b2[n] = F0
+            prim[n] = -1
+            n += 1
+    return n
+
+
 @kernel
 def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters):
     """Closest hits of the camera rays (offset jx, jy), row-major: the
@@ -238,21 +261,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, ou
             break
         x0 = (p % tiles_x) * side
         y0 = (p // tiles_x) * side
-        n = np.int64(0)             # not a literal 0 (jit/presets.py: "Literal arguments")
-        for yy in range(side):
-            for xx in range(side):
-                x = min(x0 + xx, width - 1)
-                y = min(y0 + yy, height - 1)
-                d = primary_dir(cam, x, y, jx, jy)
-                ray[OX, n], ray[OY, n], ray[OZ, n] = cam[0], cam[1], cam[2]
-                ray[DX, n], ray[DY, n], ray[DZ, n] = d[0], d[1], d[2]
-                ray[TMIN, n] = F0
-                # pixels past the image's edge repeat the last column/row: dead rays
-                h_t[n] = INF if (x0 + xx < width and y0 + yy < height) else -INF
-                h_b1[n] = F0
-                h_b2[n] = F0
-                prim[n] = -1
-                n += 1
+        n = load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx, jy, side)
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
                       counters, p)
         n = 0
@@ -309,6 +318,17 @@ def bvh_sample_visibility(bvh: Bvh, surface, lights, rows, vis, skip=None):
     return int(sum(live)), counters.sum(axis=0)
 
 
+def ray_mode(origins, dirs):
+    """SHARED_ORIGIN when rays (n, 3) share their origin, SHARED_DIRECTION
+    their direction, else SINGLE."""
+    n = origins.shape[0]
+    if n and np.all(origins == origins[:1]):
+        return SHARED_ORIGIN
+    if n and np.all(dirs == dirs[:1]):
+        return SHARED_DIRECTION
+    return SINGLE
+
+
 def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=False, mode=None):
     """(t, prim, b1, b2, counters) of arbitrary rays (n, 3): packets when all
     rays share their origin or their direction, else one ray at a time
@@ -317,12 +337,7 @@ def bvh_trace_rays(bvh: Bvh, origins, dirs, t_min=None, t_max=None, any_hit=Fals
     dirs = np.asarray(dirs, np.float32)
     n = origins.shape[0]
     if mode is None:
-        if n and np.all(origins == origins[:1]):
-            mode = SHARED_ORIGIN
-        elif n and np.all(dirs == dirs[:1]):
-            mode = SHARED_DIRECTION
-        else:
-            mode = SINGLE
+        mode = ray_mode(origins, dirs)
     t_min = np.zeros(n, np.float32) if t_min is None else np.ascontiguousarray(t_min, np.float32)
     t_max = np.full(n, np.inf, np.float32) if t_max is None else np.ascontiguousarray(t_max, np.float32)
     out = (np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32))

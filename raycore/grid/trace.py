@@ -27,6 +27,7 @@ class Hits(NamedTuple):
     b1: np.ndarray       # f32 barycentric weight of vertex 1
     b2: np.ndarray       # f32 barycentric weight of vertex 2
     counters: np.ndarray  # (N_COUNTERS,) i64: packets, cells, tests, candidates, fallback rays
+    inst: np.ndarray = None  # i32 instance of each hit in an instanced world (raycore/instancing), else None
 
 
 def _sub_size(packet):

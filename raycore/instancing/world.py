@@ -1,0 +1,192 @@
+"""An instanced world's structures: the prototypes' trees built once (and
+refit when they deform), and a top-level tree over the instances' world
+boxes, rebuilt every frame.
+
+The frame's triangles (Geometry) hold every object once: the objects placed
+in the world as they are, and each instanced object's prototype in its own
+space. All of them live in one set of trees (bvh/scene.SceneBvh: a tree per
+moving object, one for the static ones, one per prototype); the world's
+trees are instances under the identity, and each copy of a prototype is an
+instance of its tree under its own transform. A ray reaching an instance in
+the top level is carried into the instance's space (instancing/walk.py) and
+walks the prototype's tree there: an affine map keeps a packet's common
+origin and its frustum, and a ray's t, so packets and closest hits work
+unchanged. Memory per instance: two 3x4 matrices, its tree id and the top
+level's two nodes (~200 bytes); none per copied triangle.
+"""
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from raycore.bvh.build import build_region
+from raycore.bvh.nodes import Bvh, empty_bvh
+from raycore.bvh.scene import SceneBvh
+from raycore.geometry.mesh import gather_triangles, vertex_normals
+from raycore.jit.presets import parallel_kernel
+
+# an instance's world box is widened by this fraction of its largest
+# coordinate: the box is made from the prototype's box in float64, and the
+# rays are tested against the prototype in its own space after a float32
+# transform, whose rounding must not let a ray that hits there miss the box here
+BOX_PAD = 2.0 ** -18
+
+
+class InstanceFrame(NamedTuple):
+    """The instances of one frame (prototype = a face range of the frame's Geometry)."""
+    ranges: np.ndarray       # (P, 2) int64: each prototype's faces [first, end) in Geometry.faces
+    moving: np.ndarray       # (P,) bool: the prototype deforms (its tree is refit every frame)
+    proto: np.ndarray        # (N,) int32: each instance's prototype
+    matrices: np.ndarray     # (N, 3, 4) float64: world from object (a zero 3x3: hidden)
+    material: np.ndarray     # (N,) int32: the instance's material, -1: its prototype's
+    id_base: np.ndarray      # (N,) int64: primitive id of the copy's first triangle (the flattened world's)
+    tri_shift: np.ndarray    # (n_t,) int64: added to a world triangle's index for its primitive id
+
+
+class Placement(NamedTuple):
+    """Every instance the traversal sees (the world's trees under the identity first)."""
+    tree: np.ndarray         # (M,) int64: root node of the instance's tree
+    inverse: np.ndarray      # (M, 12) f32: object from world, rows of a 3x4
+    forward: np.ndarray      # (M, 12) f32: world from object
+    normal: np.ndarray       # (M, 9) f32: the inverse transpose's 3x3, for normals
+    identity: np.ndarray     # (M,) bool
+    material: np.ndarray     # (M,) int32
+    id_base: np.ndarray      # (M,) int64
+
+
+@parallel_kernel
+def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
+    """World box (6) and its centre of each instance: its tree's root box
+    (root_box[tree_of[j]]) under forward[j], in float64, widened by pad of
+    its largest coordinate."""
+    for j in numba.prange(tree_of.shape[0]):
+        b = root_box[tree_of[j]]
+        m = forward[j]
+        for a in range(3):
+            lo, hi = np.inf, -np.inf
+            for corner in range(8):
+                x = np.float64(b[3 if corner & 1 else 0])
+                y = np.float64(b[4 if corner & 2 else 1])
+                z = np.float64(b[5 if corner & 4 else 2])
+                w = m[4 * a] * x + m[4 * a + 1] * y + m[4 * a + 2] * z + m[4 * a + 3]
+                lo = min(lo, w)
+                hi = max(hi, w)
+            bounds[j, a] = lo
+            bounds[j, 3 + a] = hi
+            centroids[j, a] = np.float32(0.5 * (lo + hi))
+        big = np.float32(0.0)
+        for q in range(6):
+            big = max(big, abs(bounds[j, q]))
+        for a in range(3):
+            bounds[j, a] -= np.float32(pad) * big
+            bounds[j, 3 + a] += np.float32(pad) * big
+
+
+def _rows(m):
+    """(n, 3, 4) -> (n, 12) f32 rows."""
+    return np.ascontiguousarray(m.reshape(len(m), 12), np.float32)
+
+
+class InstancedStructures:
+    """The structures of an instanced world, kept from frame to frame: the
+    frame's triangle corners and vertex normals (every object once, the
+    prototypes in their own space), the trees, and the top level.
+    world_ranges: (first, end) face ranges of the world's moving objects
+    (one tree each); every other world triangle in one static tree."""
+
+    def __init__(self, faces, n_vertices, vf_start, vf_faces, frame: InstanceFrame, world_ranges=()):
+        self.faces, self.vf_start, self.vf_faces = faces, vf_start, vf_faces
+        n = faces.shape[0]
+        self.tri_verts = np.empty((n, 9), np.float32)
+        self.normals = np.empty((n_vertices, 3), np.float32)
+        in_world = np.ones(n, bool)
+        for s, e in frame.ranges:
+            in_world[s:e] = False
+        groups, moving = [], []
+        for s, e in world_ranges:
+            groups.append(np.arange(s, e, dtype=np.int32))
+            moving.append(True)
+            in_world[s:e] = False
+        groups.append(np.nonzero(in_world)[0].astype(np.int32))
+        moving.append(False)
+        n_world = len(groups)
+        for (s, e), m in zip(frame.ranges, frame.moving):
+            groups.append(np.arange(s, e, dtype=np.int32))
+            moving.append(bool(m))
+        # SceneBvh keeps the groups with triangles: its tree k is groups[kept[k]]
+        kept = [g for g, tris in enumerate(groups) if len(tris)]
+        self.trees = SceneBvh(n, groups, moving, faces)
+        tree_of_group = {g: k for k, g in enumerate(kept)}
+        self.world_trees = np.array([tree_of_group[g] for g in range(n_world) if g in tree_of_group], np.int64)
+        # a prototype without triangles has no tree: its instances are left out
+        self.proto_tree = np.array([tree_of_group.get(n_world + p, -1) for p in range(len(frame.ranges))],
+                                   np.int64)
+        self.top = None
+        self.stats = {}
+
+    def lazy_normals(self, n_pixels):
+        return False
+
+    def normals_now(self):
+        vertex_normals(self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+        return self.normals
+
+    def placement(self, frame: InstanceFrame) -> Placement:
+        """Every instance the top level holds this frame: the world's trees,
+        then the visible copies (an invertible matrix) of prototypes with
+        triangles."""
+        lin = frame.matrices[:, :, :3]
+        det = np.linalg.det(lin) if len(lin) else np.zeros(0)
+        shown = (np.abs(det) > 0) & (self.proto_tree[frame.proto] >= 0) if len(lin) else np.zeros(0, bool)
+        inv = np.zeros((len(lin), 3, 4))
+        if np.any(shown):
+            inv_lin = np.linalg.inv(lin[shown])
+            inv[shown, :, :3] = inv_lin
+            inv[shown, :, 3] = -np.einsum("nij,nj->ni", inv_lin, frame.matrices[shown, :, 3])
+        # an inverse beyond float32 (a copy scaled to nothing) is hidden, as the copy is
+        shown &= np.all(np.isfinite(inv.astype(np.float32)), axis=(1, 2))
+        ids = np.nonzero(shown)[0]
+        k = len(self.world_trees)
+        eye = np.tile(np.eye(3, 4), (k, 1, 1))
+        forward = np.concatenate([eye, frame.matrices[ids]])
+        inverse = np.concatenate([eye, inv[ids]])
+        normal = np.concatenate([np.tile(np.eye(3), (k, 1, 1)), np.transpose(inv[ids, :, :3], (0, 2, 1))])
+        return Placement(np.concatenate([self.trees.node_lo[self.world_trees],
+                                         self.trees.node_lo[self.proto_tree[frame.proto[ids]]]]).astype(np.int64),
+                         _rows(inverse), _rows(forward), np.ascontiguousarray(normal.reshape(-1, 9), np.float32),
+                         np.r_[np.ones(k, bool), np.zeros(len(ids), bool)],
+                         np.r_[np.full(k, -1, np.int32), frame.material[ids]].astype(np.int32),
+                         np.r_[np.zeros(k, np.int64), frame.id_base[ids]].astype(np.int64))
+
+    def update(self, vertices, frame: InstanceFrame):
+        """This frame's trees and top level: (tri_verts, trees' Bvh, top Bvh, Placement)."""
+        gather_triangles(vertices, self.faces, self.tri_verts)
+        bvh = self.trees.update(self.tri_verts, vertices)
+        self.stats = dict(self.trees.stats)
+        place = self.placement(frame)
+        m = len(place.tree)
+        if self.top is None or self.top.tri.shape[0] < m:
+            self.top = empty_bvh(max(2 * m, 1), max(m, 1))
+        top = self.top
+        if m == 0:
+            top.box[0, :3], top.box[0, 3:] = np.inf, -np.inf
+            top.child[0], top.count[0] = -1, 0
+        else:
+            bounds = np.empty((m, 6), np.float32)
+            centroids = np.empty((m, 3), np.float32)
+            instance_boxes(bvh.box, place.tree, place.forward.astype(np.float64), BOX_PAD, bounds, centroids)
+            order = np.empty(m, np.int32)
+            build_region(bounds, centroids, 1, 0, 0, top.box, top.child, top.count, order,
+                         numba.get_num_threads())
+            top.tri[:m] = order
+        self.stats["instances"] = m - len(self.world_trees)
+        return self.tri_verts, bvh, Bvh(top.node, top.node_i, top.tri, top.verts), place
+
+    def build(self, names, geom, cfg, buffers, counters) -> tuple:
+        """(tri_verts, {name: accelerator}): one two-level structure serves
+        every name asked for (camera and shadow rays)."""
+        from raycore.instancing.accel import InstancedAccel
+        tri_verts, bvh, top, place = self.update(geom.vertices, geom.instances)
+        counters.update(self.stats)
+        accel = InstancedAccel(top, bvh, place, buffers.work)
+        return tri_verts, {name: accel for name in names}
