@@ -15,21 +15,8 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.interpolate import Curve, locate
+from anim.track_kernels import instance_matrices
 from anim.tracks import FLOAT32_LIMIT, check_times
-
-
-def _slerp(q0, q1, u):
-    """Shortest-arc slerp of unit quaternions q0, q1 (n, 4) at u in [0, 1]."""
-    d = np.sum(q0 * q1, axis=1)
-    q1 = np.where(d[:, None] < 0, -q1, q1)
-    d = np.abs(d)
-    ang = np.arccos(np.minimum(d, 1.0))
-    near = d > 1.0 - 1e-10                               # nearly equal: normalised lerp
-    sin = np.where(near, 1.0, np.sin(ang))
-    w0 = np.where(near, 1.0 - u, np.sin((1.0 - u) * ang) / sin)
-    w1 = np.where(near, u, np.sin(u * ang) / sin)
-    q = w0[:, None] * q0 + w1[:, None] * q1
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def quaternion_matrices(q):
@@ -140,16 +127,17 @@ class InstanceTable:
         tr = self.translation(t)
         scale = self.scale(t)
         if len(self.times) == 1:
-            q, vis = self.quats[0], self.visible[0]
+            q0 = q1 = self.quats[0]
+            u, vis = 0.0, self.visible[0]
         else:
             t_w, k = locate(self.times, t, self.extrapolate)
             if t_w >= self.times[-1]:
-                q, vis = self.quats[-1], self.visible[-1]
+                q0 = q1 = self.quats[-1]
+                u, vis = 0.0, self.visible[-1]
             else:                   # visibility holds from the key at or before t
+                q0, q1, vis = self.quats[k], self.quats[k + 1], self.visible[k]
                 u = (t_w - self.times[k]) / (self.times[k + 1] - self.times[k])
-                q, vis = _slerp(self.quats[k], self.quats[k + 1], u), self.visible[k]
         out = np.empty((self.n, 3, 4))
-        out[:, :, :3] = quaternion_matrices(q) * scale[:, None, :]
-        out[:, :, 3] = tr
-        out[~vis, :, :3] = 0.0
+        instance_matrices(np.ascontiguousarray(q0), np.ascontiguousarray(q1), float(u), np.ascontiguousarray(tr),
+                          np.ascontiguousarray(scale), np.ascontiguousarray(vis), out)
         return out

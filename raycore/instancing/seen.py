@@ -18,7 +18,7 @@ INT32_MAX = 2 ** 31 - 1
 
 
 @parallel_kernel
-def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, forward, normal, identity,
+def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, forward, inverse, identity,
                inst_material, id_base, out_verts, out_vertices, out_normals, out_uvs, out_material, out_prim, out_id):
     """Slot i of every hit pixel i (prim[i] >= 0, in instance inst[i]):
     out_verts (n, 9), out_vertices and out_normals (3n, 3), out_uvs (3n, 2)
@@ -33,7 +33,7 @@ def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shi
         j = inst[i]
         out_prim[i] = i
         m = forward[j]
-        q = normal[j]
+        q = inverse[j]          # normals go by its transpose
         same = identity[j]
         for c in range(3):
             x, y, z = tri_verts[k, 3 * c], tri_verts[k, 3 * c + 1], tri_verts[k, 3 * c + 2]
@@ -42,8 +42,8 @@ def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shi
             if not same:
                 x, y, z = (m[0] * x + m[1] * y + m[2] * z + m[3], m[4] * x + m[5] * y + m[6] * z + m[7],
                            m[8] * x + m[9] * y + m[10] * z + m[11])
-                nx, ny, nz = (q[0] * nx + q[1] * ny + q[2] * nz, q[3] * nx + q[4] * ny + q[5] * nz,
-                              q[6] * nx + q[7] * ny + q[8] * nz)
+                nx, ny, nz = (q[0] * nx + q[4] * ny + q[8] * nz, q[1] * nx + q[5] * ny + q[9] * nz,
+                              q[2] * nx + q[6] * ny + q[10] * nz)
                 length = np.sqrt(nx * nx + ny * ny + nz * nz)
                 if length > 0:
                     nx, ny, nz = nx / length, ny / length, nz / length
@@ -76,7 +76,7 @@ class SeenTriangles:
         """Slots for hits (prim, inst) of one pass (prim -1: a miss):
         (prim of the slots, verts, faces, normals, material, uvs)."""
         n = prim.shape[0]
-        place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, place.forward, place.normal,
+        place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, place.forward, place.inverse,
                    place.identity, place.material, place.id_base, self.verts[:n], self.vertices[:3 * n],
                    self.normals[:3 * n], self.uvs[:3 * n], self.material[:n], self.prim[:n], self.ids[:n])
         return self.prim[:n], self.verts[:n], self.faces[:n], self.normals[:3 * n], self.material[:n], \

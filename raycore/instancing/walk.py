@@ -16,8 +16,9 @@ at a time, and a chunk that misses an instance's box skips it.
 import numpy as np
 
 from raycore.bvh.nodes import CHILD, COUNT, STACK
-from raycore.bvh.packets import (CHUNK_BITS, DX, DY, DZ, HINT_BITS, LANES, NODE_SHIFT, OX, OY, OZ, PACKET,
-                                 SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, TMIN, N_ROWS, _chunks_hitting_box, _push_children,
+from raycore.bvh.packets import (CHUNK_BITS, DX, DY, DZ, HINT_BITS, IX, LANES, N_CHUNKS, NODE_SHIFT, OX, OY, OZ, PACKET,
+                                 SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, TMIN, N_ROWS, _chunks_hitting_box, _lower,
+                                 _push_children, _upper,
                                  set_inverse, trace_single, walk_packet)
 from raycore.bvh.trace import _load_light_rays, load_camera_tile
 from raycore.config import EPS_OFFSET_ULPS
@@ -29,20 +30,21 @@ from raycore.jit.tile_queue import new_queue, next_tile
 
 
 @helper
-def _to_instance(ray, lray, n, inverse, j):
-    """Rays 0..n-1 of `ray` into instance j's space (inverse[j]: object
-    from world, a 3x4's rows) in `lray`."""
+def _to_instance(ray, lray, idx, n, inverse, j):
+    """Rays idx[0..n) of `ray` into instance j's space (inverse[j]: object
+    from world, a 3x4's rows), packed as rays 0..n-1 of `lray`."""
     m = inverse[j]
-    for r in range(n):
+    for q in range(n):
+        r = idx[q]
         ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
         dx, dy, dz = ray[DX, r], ray[DY, r], ray[DZ, r]
-        lray[OX, r] = m[0] * ox + m[1] * oy + m[2] * oz + m[3]
-        lray[OY, r] = m[4] * ox + m[5] * oy + m[6] * oz + m[7]
-        lray[OZ, r] = m[8] * ox + m[9] * oy + m[10] * oz + m[11]
-        lray[DX, r] = m[0] * dx + m[1] * dy + m[2] * dz
-        lray[DY, r] = m[4] * dx + m[5] * dy + m[6] * dz
-        lray[DZ, r] = m[8] * dx + m[9] * dy + m[10] * dz
-        lray[TMIN, r] = ray[TMIN, r]
+        lray[OX, q] = m[0] * ox + m[1] * oy + m[2] * oz + m[3]
+        lray[OY, q] = m[4] * ox + m[5] * oy + m[6] * oz + m[7]
+        lray[OZ, q] = m[8] * ox + m[9] * oy + m[10] * oz + m[11]
+        lray[DX, q] = m[0] * dx + m[1] * dy + m[2] * dz
+        lray[DY, q] = m[4] * dx + m[5] * dy + m[6] * dz
+        lray[DZ, q] = m[8] * dx + m[9] * dy + m[10] * dz
+        lray[TMIN, q] = ray[TMIN, r]
 
 
 @helper
@@ -77,13 +79,33 @@ def _in_instance(trees, tree_root, lray, h_t, h_b1, h_b2, lprim, n, any_hit, vis
 
 
 @helper
+def _ray_hits_box(ray, h_t, r, box, i):
+    """Whether live ray r's [t_min, t_max] overlaps box i (widened as the trees' box tests)."""
+    t_in = -INF
+    t_out = INF
+    for a in range(3):
+        o = ray[OX + a, r]
+        inv = ray[IX + a, r]
+        ta = (box[i, a] - o) * inv
+        tb = (box[i, 3 + a] - o) * inv
+        t_in = max(t_in, min(ta, tb))
+        t_out = min(t_out, max(ta, tb))
+    return max(_lower(t_in), ray[TMIN, r]) <= min(_upper(t_out), h_t[r])
+
+
+@helper
 def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only, mode,
-               lray, lprim, ia, planes, stack, top_stack, counters, row):
+               local, ia, planes, stack, top_stack, counters, row):
     """Closest (or any) hits of packet rays 0..n-1 in an instanced world:
     on entry h_t holds each ray's t_max (-inf: no ray), prim -1; on return
     prim >= 0 marks a hit, prim the triangle (the frame's id) and inst the
-    instance (place_tree[inst] its tree's root), as walk_packet's otherwise."""
+    instance (place_tree[inst] its tree's root), as walk_packet's otherwise.
+    At an instance, the rays that reach its box are packed into a packet
+    of their own and carried into its space (local: that packet's
+    buffers): a far instance seen by a few rays of a packet costs a walk
+    of a few."""
     box, node_i, top_inst = top[0], top[1], top[2]
+    lray, lt, lb1, lb2, lprim, idx = local
     n_pad = min(PACKET, (n + LANES - 1) // LANES * LANES)
     for r in range(n, n_pad):                  # dead copies of ray 0 fill the last chunk
         for q in range(TMIN + 1):
@@ -110,26 +132,43 @@ def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst
         hint = (top_stack[depth] >> CHUNK_BITS) & ((1 << HINT_BITS) - 1)
         n_visits += 1
         c = node_i[i, COUNT]
-        mask, hint = _chunks_hitting_box(ray, h_t, mask, box, i, c > 0, hint)
-        if mask == 0:
-            continue
         if c <= 0:
+            mask, hint = _chunks_hitting_box(ray, h_t, mask, box, i, False, hint)
+            if mask == 0:
+                continue
             left = node_i[i, CHILD]
             if left < 0:
                 continue
             depth = _push_children(top_stack, depth, left, sgn[-1 - c], mask, hint)
             continue
+        # a leaf: its instances' box, ray by ray over the chunks that reached it
+        m = 0
+        for ch in range(N_CHUNKS):
+            if (mask >> ch) & 1:
+                for r in range(ch * LANES, min(n, ch * LANES + LANES)):
+                    if h_t[r] >= ray[TMIN, r] and _ray_hits_box(ray, h_t, r, box, i):
+                        idx[m] = r
+                        m += 1
+        if m == 0:
+            continue
         first = node_i[i, CHILD]
         for k in range(first, first + c):
             j = top_inst[k]
-            _to_instance(ray, lray, n, inverse, j)
-            _in_instance(trees, place_tree[j], lray, h_t, h_b1, h_b2, lprim, n, any_hit, vis_only, mode, ia,
+            _to_instance(ray, lray, idx, m, inverse, j)
+            for q in range(m):
+                lt[q] = h_t[idx[q]]
+                lb1[q] = h_b1[idx[q]]
+                lb2[q] = h_b2[idx[q]]
+            _in_instance(trees, place_tree[j], lray, lt, lb1, lb2, lprim, m, any_hit, vis_only, mode, ia,
                          planes, stack, counters, row)
-            if not vis_only:
-                for r in range(n):
-                    if lprim[r] >= 0:
-                        prim[r] = trees[2][lprim[r]]
-                        inst[r] = j
+            for q in range(m):
+                r = idx[q]
+                h_t[r] = lt[q]
+                if lprim[q] >= 0 and not vis_only:
+                    prim[r] = trees[2][lprim[q]]
+                    inst[r] = j
+                    h_b1[r] = lb1[q]
+                    h_b2[r] = lb2[q]
         if any_hit and _live(ray, h_t, n) == 0:
             break
     counters[row, VISITS] += n_visits
@@ -141,8 +180,10 @@ def world_scratch():
     the walks' stacks."""
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty(PACKET, np.int32),
-            np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.int32), np.empty((6, 3), np.float32),
-            np.empty((6, 5), np.float32), np.empty(STACK, np.int64), np.empty(STACK, np.int64))
+            (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
+             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty(PACKET, np.int64)),
+            np.empty((6, 3), np.float32), np.empty((6, 5), np.float32), np.empty(STACK, np.int64),
+            np.empty(STACK, np.int64))
 
 
 @kernel
@@ -153,7 +194,7 @@ def world_camera(top, trees, place_tree, inverse, cam, width, height, jx, jy, qu
     side = 8
     tiles_x = (width + side - 1) // side
     n_tiles = tiles_x * ((height + side - 1) // side)
-    ray, h_t, h_b1, h_b2, prim, inst, lray, lprim, ia, planes, stack, top_stack = world_scratch()
+    ray, h_t, h_b1, h_b2, prim, inst, local, ia, planes, stack, top_stack = world_scratch()
     while True:
         p = next_tile(queue, n_tiles)
         if p < 0:
@@ -162,7 +203,7 @@ def world_camera(top, trees, place_tree, inverse, cam, width, height, jx, jy, qu
         y0 = (p // tiles_x) * side
         n = load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx, jy, side)
         walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, False, False,
-                   SHARED_ORIGIN, lray, lprim, ia, planes, stack, top_stack, counters, p)
+                   SHARED_ORIGIN, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
         q = 0
         for yy in range(side):
@@ -191,7 +232,7 @@ def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direct
     want_hits = out_t.shape[0] > 0
     want_vis = vis.shape[0] > 0
     vis_only = any_hit and want_vis and not want_hits
-    ray, h_t, h_b1, h_b2, prim, inst, lray, lprim, ia, planes, stack, top_stack = world_scratch()
+    ray, h_t, h_b1, h_b2, prim, inst, local, ia, planes, stack, top_stack = world_scratch()
     while True:
         p = next_tile(queue, n_packets)
         if p < 0:
@@ -211,7 +252,7 @@ def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direct
             h_b2[r] = F0
             prim[r] = -1
         walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only,
-                   mode, lray, lprim, ia, planes, stack, top_stack, counters, p)
+                   mode, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
         for r in range(n):
             i = order[base + r]
@@ -232,7 +273,7 @@ def world_light_samples(top, trees, place_tree, inverse, lights, rows, lifted, g
     """bvh/trace.trace_light_samples in an instanced world: every light's
     shadow rays from the samples of the packets this thread pulls, into
     vis[rows[j]]. Returns how many rays were active."""
-    ray, h_t, h_b1, h_b2, prim, inst, lray, lprim, ia, planes, stack, top_stack = world_scratch()
+    ray, h_t, h_b1, h_b2, prim, inst, local, ia, planes, stack, top_stack = world_scratch()
     n_samples = mag.shape[0]
     n_packets = (n_samples + PACKET - 1) // PACKET
     live = 0
@@ -250,7 +291,7 @@ def world_light_samples(top, trees, place_tree, inverse, lights, rows, lifted, g
                                      geo_n, smooth_n, mag, offset_ulps, skip)
             mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
             walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, True, True, mode,
-                       lray, lprim, ia, planes, stack, top_stack, counters, p)
+                       local, ia, planes, stack, top_stack, counters, p)
             counters[p, PACKETS] += 1
             out = rows[j]
             for r in range(n):

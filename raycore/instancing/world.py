@@ -48,7 +48,6 @@ class Placement(NamedTuple):
     tree: np.ndarray         # (M,) int64: root node of the instance's tree
     inverse: np.ndarray      # (M, 12) f32: object from world, rows of a 3x4
     forward: np.ndarray      # (M, 12) f32: world from object
-    normal: np.ndarray       # (M, 9) f32: the inverse transpose's 3x3, for normals
     identity: np.ndarray     # (M,) bool
     material: np.ndarray     # (M,) int32
     id_base: np.ndarray      # (M,) int64
@@ -61,7 +60,7 @@ def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
     its largest coordinate."""
     for j in numba.prange(tree_of.shape[0]):
         b = root_box[tree_of[j]]
-        m = forward[j]
+        m = forward[j].astype(np.float64)
         for a in range(3):
             lo, hi = np.inf, -np.inf
             for corner in range(8):
@@ -82,9 +81,38 @@ def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
             bounds[j, 3 + a] += np.float32(pad) * big
 
 
-def _rows(m):
-    """(n, 3, 4) -> (n, 12) f32 rows."""
-    return np.ascontiguousarray(m.reshape(len(m), 12), np.float32)
+@parallel_kernel
+def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forward, shown):
+    """Per instance j (matrices[j]: world from object, a 3x4's rows, float64):
+    its tree's root, its inverse and itself as float32 rows, and whether it
+    is shown: a prototype with a tree, an invertible matrix, an inverse
+    finite in float32 (a copy scaled to nothing is hidden, as a hidden
+    copy's zero matrix is)."""
+    for j in numba.prange(proto.shape[0]):
+        m = matrices[j]
+        a, b, c = m[0], m[1], m[2]
+        d, e, f = m[4], m[5], m[6]
+        g, h, i = m[8], m[9], m[10]
+        c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+        c10, c11, c12 = f * g - d * i, a * i - c * g, c * d - a * f
+        c20, c21, c22 = d * h - e * g, b * g - a * h, a * e - b * d
+        det = a * c00 + b * c10 + c * c20
+        t = proto_tree[proto[j]]
+        ok = det != 0.0 and t >= 0
+        r = 1.0 / det if ok else 0.0
+        lin = (c00 * r, c01 * r, c02 * r, c10 * r, c11 * r, c12 * r, c20 * r, c21 * r, c22 * r)
+        tx, ty, tz = m[3], m[7], m[11]
+        for row in range(3):
+            p, q, s = lin[3 * row], lin[3 * row + 1], lin[3 * row + 2]
+            inverse[j, 4 * row] = p
+            inverse[j, 4 * row + 1] = q
+            inverse[j, 4 * row + 2] = s
+            inverse[j, 4 * row + 3] = -(p * tx + q * ty + s * tz)
+        for q in range(12):
+            forward[j, q] = m[q]
+            ok = ok and np.isfinite(inverse[j, q])
+        shown[j] = ok
+        tree[j] = node_lo[t] if t >= 0 else -1
 
 
 class InstancedStructures:
@@ -133,30 +161,28 @@ class InstancedStructures:
 
     def placement(self, frame: InstanceFrame) -> Placement:
         """Every instance the top level holds this frame: the world's trees,
-        then the visible copies (an invertible matrix) of prototypes with
-        triangles."""
-        lin = frame.matrices[:, :, :3]
-        det = np.linalg.det(lin) if len(lin) else np.zeros(0)
-        shown = (np.abs(det) > 0) & (self.proto_tree[frame.proto] >= 0) if len(lin) else np.zeros(0, bool)
-        inv = np.zeros((len(lin), 3, 4))
-        if np.any(shown):
-            inv_lin = np.linalg.inv(lin[shown])
-            inv[shown, :, :3] = inv_lin
-            inv[shown, :, 3] = -np.einsum("nij,nj->ni", inv_lin, frame.matrices[shown, :, 3])
-        # an inverse beyond float32 (a copy scaled to nothing) is hidden, as the copy is
-        shown &= np.all(np.isfinite(inv.astype(np.float32)), axis=(1, 2))
+        then the visible copies (an invertible matrix whose inverse is
+        finite in float32) of prototypes with triangles."""
+        k, n = len(self.world_trees), len(frame.proto)
+        tree = np.empty(k + n, np.int64)
+        inverse = np.empty((k + n, 12), np.float32)
+        forward = np.empty((k + n, 12), np.float32)
+        tree[:k] = self.trees.node_lo[self.world_trees]
+        inverse[:k] = forward[:k] = np.eye(3, 4, dtype=np.float32).reshape(12)
+        shown = np.empty(n, np.bool_)
+        invert_instances(frame.matrices.reshape(n, 12), frame.proto, self.proto_tree, self.trees.node_lo,
+                         tree[k:], inverse[k:], forward[k:], shown)
         ids = np.nonzero(shown)[0]
-        k = len(self.world_trees)
-        eye = np.tile(np.eye(3, 4), (k, 1, 1))
-        forward = np.concatenate([eye, frame.matrices[ids]])
-        inverse = np.concatenate([eye, inv[ids]])
-        normal = np.concatenate([np.tile(np.eye(3), (k, 1, 1)), np.transpose(inv[ids, :, :3], (0, 2, 1))])
-        return Placement(np.concatenate([self.trees.node_lo[self.world_trees],
-                                         self.trees.node_lo[self.proto_tree[frame.proto[ids]]]]).astype(np.int64),
-                         _rows(inverse), _rows(forward), np.ascontiguousarray(normal.reshape(-1, 9), np.float32),
-                         np.r_[np.ones(k, bool), np.zeros(len(ids), bool)],
-                         np.r_[np.full(k, -1, np.int32), frame.material[ids]].astype(np.int32),
-                         np.r_[np.zeros(k, np.int64), frame.id_base[ids]].astype(np.int64))
+        m = k + len(ids)
+        if len(ids) < n:                   # the hidden copies left out
+            tree[k:m], inverse[k:m], forward[k:m] = tree[k:][ids], inverse[k:][ids], forward[k:][ids]
+        material = np.empty(m, np.int32)
+        material[:k], material[k:] = -1, frame.material[ids]
+        id_base = np.zeros(m, np.int64)
+        id_base[k:] = frame.id_base[ids]
+        identity = np.zeros(m, np.bool_)
+        identity[:k] = True
+        return Placement(tree[:m], inverse[:m], forward[:m], identity, material, id_base)
 
     def update(self, vertices, frame: InstanceFrame):
         """This frame's trees and top level: (tri_verts, trees' Bvh, top Bvh, Placement)."""
@@ -174,7 +200,7 @@ class InstancedStructures:
         else:
             bounds = np.empty((m, 6), np.float32)
             centroids = np.empty((m, 3), np.float32)
-            instance_boxes(bvh.box, place.tree, place.forward.astype(np.float64), BOX_PAD, bounds, centroids)
+            instance_boxes(bvh.box, place.tree, place.forward, BOX_PAD, bounds, centroids)
             order = np.empty(m, np.int32)
             build_region(bounds, centroids, 1, 0, 0, top.box, top.child, top.count, order,
                          numba.get_num_threads())

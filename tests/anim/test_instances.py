@@ -242,3 +242,88 @@ def test_copies_that_would_not_fit_are_refused_before_they_are_made(tmp_path, mo
     assert "objects.0.instances" in res.output and len(res.output.strip().splitlines()) == 1
     monkeypatch.setattr(anim.memory, "available_bytes", lambda: None)          # unknown: no refusal
     assert CliRunner().invoke(main, ["check", str(path)]).exit_code == 0
+
+
+def _frames(path, instancing, times, **cfg):
+    """(Z, RGBA, id) of frames at `times` rendered with render.instancing = instancing."""
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of
+    from anim.scene import AnimatedScene
+    from raycore.frame import Shading
+    scene = AnimatedScene(path, instancing=instancing)
+    assert bool(scene.two_level) == (instancing == "two_level")
+    c = config_of(scene, **cfg)
+    r = SceneRenderer(scene, c, Shading(scene.material_table, np.zeros(3, np.float32), np.zeros((0, 3), np.int64),
+                                        scene.light_table))
+    out = []
+    for t in times:
+        res = r.render(t)[1]
+        out.append((res.z.copy(), res.rgba.copy(), res.aovs["id"].copy() if "id" in res.aovs else None))
+    return out
+
+
+def _field(tmp_path):
+    """A ground, a bending prototype of its own motion and copies of it that
+    move, one hidden from the second key on, under a point and a sun."""
+    tr, q, scale = _data(7)
+    visible = np.ones((K, N), bool)
+    visible[1:, 3] = False
+    np.savez(tmp_path / "field.npz", t=np.array(TIMES), translation=tr * [1, 0.3, 1], rotation=q, scale=scale,
+             visible=visible)
+    _box(tmp_path)
+    (tmp_path / "ground.obj").write_text("v -9 -2 -9\nv 9 -2 -9\nv 9 -2 9\nv -9 -2 9\nf 1 3 2\nf 1 4 3\n")
+    path = tmp_path / "two.yaml"
+    path.write_text(HEAD.replace("[48, 48]", "[96, 80]").replace(
+        "lights: [{position: [3, 6, 4], intensity: 40}]",
+        "lights: [{position: [3, 6, 4], intensity: 40}, {type: directional, direction: [-0.3, -1, -0.2]}]")
+        + "  - name: ground\n    mesh: ground.obj\n"
+        + "  - name: boxes\n    mesh: box.obj\n" + OWN + "    instances: {file: field.npz}\n")
+    return path
+
+
+def _agree(a, b, share=0.999):
+    """Z of the same pixels within float32 rounding on >= share of them, the
+    same primitive ids, colours alike but where a shadow ray grazes."""
+    for (za, ca, ia), (zb, cb, ib) in zip(a, b):
+        both_inf = np.isinf(za) & np.isinf(zb)
+        assert np.mean(np.isclose(za, zb, rtol=1e-4) | both_inf) >= share
+        assert np.isfinite(za).mean() > 0.2
+        if ia is not None:
+            assert np.mean(ia == ib) >= share
+        assert np.mean(np.abs(ca - cb).max(axis=2) < 1e-3) >= share
+
+
+def test_two_level_frames_are_the_flattened_frames(tmp_path):
+    """render.instancing two_level (a tree for the prototype, a top level
+    over the copies) against flatten (every copy's triangles) on the same
+    scene: the same depth, ids (the flattened world's numbering, so objects
+    after the copies keep theirs) and colours, while the copies and the
+    prototype move and one copy hides."""
+    path = _field(tmp_path)
+    times = [0.0, 0.4, 0.95]
+    flat = _frames(path, "flatten", times, aovs=("id",), accel="bvh")
+    two = _frames(path, "two_level", times, aovs=("id",))
+    _agree(flat, two)
+    assert len(np.unique(two[1][2])) > 10
+
+
+def test_two_level_under_motion_blur_and_an_error_budget(tmp_path):
+    """Each pass of a motion-blurred frame places the copies at its own
+    time, as the flattened frame moves their triangles; the error budget's
+    ray batches carry the instances too."""
+    path = _field(tmp_path)
+    kw = dict(spp=4, shutter=0.5, accel="bvh")
+    _agree(_frames(path, "flatten", [0.4], **kw), _frames(path, "two_level", [0.4], **kw), share=0.995)
+    kw = dict(max_error=0.02, accel="bvh")
+    _agree(_frames(path, "flatten", [0.4], **kw), _frames(path, "two_level", [0.4], **kw), share=0.995)
+
+
+def test_auto_instancing_copies_small_tables_and_traces_large_ones_two_level(tmp_path, monkeypatch):
+    import anim.scene as scene_module
+    from anim.scene import AnimatedScene
+    path = _field(tmp_path)
+    assert not AnimatedScene(path).two_level                  # 9 copies of 12 triangles: copied
+    monkeypatch.setattr(scene_module, "TWO_LEVEL_TRIANGLES", N * 12)
+    scene = AnimatedScene(path)
+    assert [o.name for o in scene.two_level] == ["boxes"]
+    assert scene.faces.shape[0] == 2 + 12 and scene.flat_triangles == 2 + N * 12
