@@ -9,8 +9,9 @@ its own package); tests/test_import_graph.py checks it:
   images/      EXR and texture files
   grid/ kdtree/ bvh/   the three acceleration structures: build, traversal, drivers
   shading/     the visible surface, shading, the image's pixels
-  accelerators.py, adaptive.py, sweep.py   one surface over the structures,
-               the error budget, the one-sweep shading pass
+  accelerators.py, adaptive.py, sweep.py, instancing/   one surface over the
+               structures, the error budget, the one-sweep shading pass,
+               instanced worlds (two-level structures)
   structures.py  the per-frame owner of the structures (built or refit as asked)
   pass_scene.py  what one pass traces: structures and camera at its time and lens
   frame.py     one frame, phase by phase

@@ -16,7 +16,7 @@ LAYERS = {
     "raycore.geometry": 1, "raycore.images": 1,
     "raycore.grid": 2, "raycore.kdtree": 2, "raycore.bvh": 2,
     "raycore.shading": 3,
-    "raycore.accelerators": 4, "raycore.adaptive": 4, "raycore.sweep": 4,
+    "raycore.accelerators": 4, "raycore.adaptive": 4, "raycore.sweep": 4, "raycore.instancing": 4,
     "raycore.structures": 5, "raycore.pass_scene": 6,
     "raycore.frame": 7,
     "anim": 10,                       # interpolation, rigs, materials, the kernels that move vertices
