@@ -18,6 +18,12 @@ from anim.interpolate import Curve, locate
 from anim.track_kernels import instance_matrices
 from anim.tracks import FLOAT32_LIMIT, check_times
 
+# render.instancing: auto traces an object's instances two-level (its
+# prototype's tree under a top level, raycore/instancing) from this many
+# copied triangles on, and copies them into the frame's triangles below
+# (docs/performance.md, instancing: the flat copies are faster while small)
+TWO_LEVEL_TRIANGLES = 1_000_000
+
 
 def quaternion_matrices(q):
     """(n, 3, 3) rotations of unit quaternions q (n, 4) w, x, y, z."""

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 
 from anim.area_lights import emitter_positions
 from anim.errors import SceneError
-from anim.instances import InstanceTable
+from anim.instances import TWO_LEVEL_TRIANGLES, InstanceTable
 from anim.keyframes import KeyStore, LinearKeys
 from anim.memory import check_copies
 from anim.interpolate import Curve
@@ -28,12 +28,6 @@ from anim.io.usd import UsdObject, is_usd, scene_of_stage
 from anim.io.usd import dependencies as usd_dependencies
 from anim.tracks import check_times, compose, rotation_curve, trs_matrix, vector_curve
 from anim.vertex_kernels import instances_into, skin_into, transform_into
-
-# render.instancing: auto traces an object's instances two-level (its
-# prototype's tree under a top level, raycore/instancing) from this many
-# copied triangles on, and copies them into the frame's triangles below
-# (docs/performance.md, instancing: the flat copies are faster while small)
-TWO_LEVEL_TRIANGLES = 1_000_000
 
 
 def _key_path(loc):
@@ -143,7 +137,8 @@ class SceneObject:
                                  warnings)
             self.base, self.faces, self.uvs = self.fbx.rest.astype(np.float32), self.fbx.faces, self.fbx.uvs
         elif is_usd(spec.mesh):
-            self.usd = UsdObject(base / spec.mesh, spec.prim, scene_path, f"{key}.mesh")
+            self.usd = UsdObject(base / spec.mesh, spec.prim, scene_path, f"{key}.mesh",
+                                 "flatten" if spec.instances is not None else instancing)
             self.base, self.faces, self.uvs = self.usd.rest.astype(np.float32), self.usd.faces, self.usd.uvs
         else:
             self.base, self.faces, self.uvs = load_mesh(base / spec.mesh, scene_path, f"{key}.mesh")
@@ -170,7 +165,7 @@ class SceneObject:
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
         self.n_vertices = len(self.base)
         self.instances = None
-        self.two_level = False
+        self.two_level = self.usd is not None and self.usd.two_level     # its point instancers' copies
         self.proto_static = self.static
         if spec.instances is not None:
             self._instance(spec, base, scene_path, key, owner, instancing)
@@ -265,9 +260,34 @@ class SceneObject:
         return curves is not None and all(c.extrapolate == "clamp" and (t1 <= c.times[0] or t0 >= c.times[-1])
                                           for c in curves)
 
+    def segments(self):
+        """(first face, end, copies) of the object's faces in the order the
+        flattened world numbers them: copies > 0 for a two-level prototype
+        (its faces once here, each copy's in the flattened world), 0 for
+        faces placed as they are."""
+        if self.two_level and self.instances is not None:
+            return [(0, len(self.faces), self.instances.n)]
+        if self.two_level:
+            return self.usd.segments
+        return [(0, len(self.faces), 0)]
+
+    def blocks(self):
+        """Per two-level prototype: (whether it deforms, its copies' material
+        slots in the file or None)."""
+        if self.instances is not None:
+            return [(not self.proto_static, None)]
+        return [(not static, slots) for static, slots in zip(self.usd.block_static, self.usd.instance_slots)]
+
+    def instance_matrices(self, t):
+        """Per two-level prototype, its copies' (n, 3, 4) world-from-prototype matrices at time t."""
+        if self.instances is not None:
+            return [self.instances.matrices(t)]
+        top = trs_matrix(self.translation, self.rotation, self.scale, t) if self.has_transform else None
+        return self.usd.instance_matrices(t, top)
+
     def place(self, t, out):
         """Write the positions at time t into out (n_v, 3) f32 (a two-level
-        object's: its prototype's)."""
+        object's: its prototypes' in their own space)."""
         if self.instances is None or self.two_level:
             self._place_one(t, out)
             return
@@ -301,7 +321,7 @@ class AnimatedScene:
         through (default: its first camera). instancing: render.instancing's
         choice instead of the file's."""
         self.path = Path(path)
-        self.camera_choice = camera
+        self.camera_choice, self.instancing_choice = camera, instancing
         self.notes = []            # what a USD stage gave and what came from defaults (`check`)
         self.spec = read_scene_file(self.path, camera, self.notes)
         spec = self.spec
@@ -339,7 +359,7 @@ class AnimatedScene:
             mat = self.material_names.index(o.material) if o.material else default_material
             if obj.file is not None and o.material is None and obj.file.materials:
                 # the file's own materials, per primitive; `material:` overrides them all
-                face_mat = self._file_materials(obj.file, i, default_material)
+                face_mat, obj.file_lookup = self._file_materials(obj.file, i, default_material)
                 if obj.instances is not None and not obj.two_level:     # the prototype's, per copy
                     face_mat = np.tile(face_mat, obj.instances.n)
                 textured = any(self.materials[m]["texture_index"] >= 0 for m in np.unique(face_mat))
@@ -415,8 +435,9 @@ class AnimatedScene:
 
     def _file_materials(self, source, index, default_material):
         """Material rows for a glTF or USD object's own materials (appended to
-        self.materials, textures registered); (n_t,) i32 row per triangle,
-        the default material where a primitive has none."""
+        self.materials, textures registered): ((n_t,) i32 row per triangle,
+        the default material where a primitive has none; the row of each
+        file slot)."""
         rows = {}
         for m, mat in source.materials.items():
             mat = dict(mat)
@@ -426,7 +447,8 @@ class AnimatedScene:
         lookup = np.full(max(rows) + 2, default_material, np.int32)
         for m, row in rows.items():
             lookup[m] = row
-        return lookup[source.face_material]       # -1 (no material) -> the last entry: the default
+        # -1 (no material) -> the last entry: the default
+        return lookup[source.face_material], lookup
 
     def _paths_outside(self):
         """(key, path) of every file reference that resolves outside the
@@ -555,37 +577,49 @@ class AnimatedScene:
         `id` AOV), every other triangle shifted by the copies before it."""
         n_t = sum(len(o.faces) for o in self.objects)
         self.tri_shift = np.zeros(n_t, np.int64)
-        self.id_base, flat = [], 0
+        self.plain = np.zeros(n_t, bool)
+        ranges, moving, protos, id_base, materials, flat = [], [], [], [], [], 0
         for o in self.objects:
-            n = len(o.faces)
-            if o.two_level:
-                self.id_base.append(flat + np.arange(o.instances.n, dtype=np.int64) * n - o.face_offset)
-                flat += o.instances.n * n
-            else:
-                self.tri_shift[o.face_offset:o.face_offset + n] = flat - o.face_offset
-                flat += n
+            fo, lookup = o.face_offset, getattr(o, "file_lookup", None)
+            if o.two_level and o.instances is None and lookup is not None:      # a USD file's instancers
+                self.plain[fo:fo + len(o.faces)] = o.usd.plain
+            blocks = iter(o.blocks() if o.two_level else ())
+            for lo, hi, copies in o.segments():
+                n = hi - lo
+                if copies:
+                    deforms, slots = next(blocks)
+                    id_base.append(flat + np.arange(copies, dtype=np.int64) * n - (fo + lo))
+                    protos.append(np.full(copies, len(ranges), np.int32))
+                    ranges.append((fo + lo, fo + hi))
+                    moving.append(deforms)
+                    materials.append(np.full(copies, -1, np.int32) if slots is None or lookup is None
+                                     else lookup[slots].astype(np.int32))
+                    flat += copies * n
+                else:
+                    self.tri_shift[fo + lo:fo + hi] = flat - (fo + lo)
+                    flat += n
         self.flat_triangles = flat
-        self.proto_ranges = np.array([[o.face_offset, o.face_offset + len(o.faces)] for o in self.two_level],
-                                     np.int64).reshape(-1, 2)
-        self.proto_moving = np.array([not o.proto_static for o in self.two_level], bool)
-        self.instance_proto = np.concatenate([np.full(o.instances.n, p, np.int32)
-                                              for p, o in enumerate(self.two_level)] or [np.zeros(0, np.int32)])
-        self.id_base = np.concatenate(self.id_base or [np.zeros(0, np.int64)])
+        self.proto_ranges = np.array(ranges, np.int64).reshape(-1, 2)
+        self.proto_moving = np.array(moving, bool)
+        self.instance_proto = np.concatenate(protos or [np.zeros(0, np.int32)])
+        self.instance_material = np.concatenate(materials or [np.zeros(0, np.int32)])
+        self.id_base = np.concatenate(id_base or [np.zeros(0, np.int64)])
 
     def instances_at(self, t):
         """The two-level objects' instances at time t (raycore/instancing/world.InstanceFrame), or None."""
         if not self.two_level:
             return None
         from raycore.instancing.world import InstanceFrame
-        matrices = np.concatenate([o.instances.matrices(t) for o in self.two_level])
+        matrices = np.concatenate([m for o in self.two_level for m in o.instance_matrices(t)])
         return InstanceFrame(self.proto_ranges, self.proto_moving, self.instance_proto, matrices,
-                             np.full(len(matrices), -1, np.int32), self.id_base, self.tri_shift)
+                             self.instance_material, self.id_base, self.tri_shift, self.plain)
 
     @property
     def world_ranges(self):
-        """(first, end) triangle ranges of the moving objects that are not
-        two-level prototypes (one tree each in an instanced world)."""
-        return [(o.face_offset, o.face_offset + len(o.faces)) for o in self.moving if not o.two_level]
+        """(first, end) triangle ranges of the moving objects' faces that are
+        not two-level prototypes (one tree each in an instanced world)."""
+        return [(o.face_offset + lo, o.face_offset + hi) for o in self.moving
+                for lo, hi, copies in o.segments() if not copies]
 
     @property
     def key_bytes(self):

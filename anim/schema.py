@@ -138,7 +138,7 @@ class Render(Strict):
     # objects with `instances:`: copied into the frame's triangles (flatten),
     # or traced as a prototype's tree per instance under a top level
     # (two_level, raycore/instancing); auto = two_level from
-    # anim.scene.TWO_LEVEL_TRIANGLES copied triangles on
+    # anim.instances.TWO_LEVEL_TRIANGLES copied triangles on
     instancing: Literal["auto", "flatten", "two_level"] = "auto"
 
     @field_validator("packet")

@@ -134,11 +134,11 @@ def main():
     """
 
 
-def load_scene(path, camera=None):
+def load_scene(path, camera=None, instancing=None):
     """AnimatedScene of path (a scene file, a USD stage or an FBX file), its warnings
     printed on stderr."""
     from anim.scene import AnimatedScene
-    scene = AnimatedScene(path, camera)
+    scene = AnimatedScene(path, camera, instancing)
     for message in scene.warnings:
         click.echo(f"frustrace: warning: {message}", err=True)
     return scene
@@ -250,8 +250,12 @@ CAMERA_HELP = ("For a USD stage: the camera prim to look through (default: the s
 @click.option("--tls-ca", type=click.Path(dir_okay=False, path_type=Path), help="CA certificate for tls:// (PEM).")
 @click.option("--tls-cert", type=click.Path(dir_okay=False, path_type=Path), help="Client certificate for tls:// (PEM).")
 @click.option("--tls-key", type=click.Path(dir_okay=False, path_type=Path), help="Client key for tls:// (PEM).")
+@click.option("--instancing", type=click.Choice(("auto", "flatten", "two_level")),
+              help="Instances (instances:, USD point instancers): copied into the frame's triangles (flatten), "
+                   "or traced as a prototype's tree per instance under a top level (two_level); auto: two-level "
+                   "from 1M copied triangles on (default: render.instancing, auto).")
 def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrite, quiet, preview_path, workers,
-           scheduler, chunk, tls_ca, tls_cert, tls_key, **settings):
+           scheduler, chunk, tls_ca, tls_cert, tls_key, instancing, **settings):
     """Render ANIM_YAML (a scene file, a USD stage: .usd, .usda, .usdc,
     .usdz, or an FBX file) to one OpenEXR file per frame, plus stats.json."""
     if resume and overwrite:
@@ -264,7 +268,7 @@ def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrit
 
     from cli.report import progress, summary_table
 
-    scene = load_scene(anim_yaml, camera)
+    scene = load_scene(anim_yaml, camera, instancing)
     spec = scene.spec
     frames = parse_frames(frames_text, scene)
     scene.check_camera(frames)                 # frames outside the file's range too

@@ -320,7 +320,7 @@ class FrameRender:
             seen = self.buffers.seen_triangles(prim.shape[0], uvs.shape[0] > 0)
             prim, tri_verts, faces, normals, tri_material, uvs = seen.place(
                 prim, inst, tri_verts, faces, normals, uvs, tri_material, scene.geom.instances.tri_shift,
-                scene.accel.place)
+                scene.geom.instances.plain, scene.accel.place)
         surface = visible_surface(scene.cam, jitter, t, prim, b1, b2, *layout, tri_verts, faces,
                                   normals, tri_material, shading.materials, uvs, shading.tex_data,
                                   shading.tex_info, self.buffers.work)

@@ -430,7 +430,8 @@ class UsdObject:
     """The meshes under one prim of a stage, as one frustrace object;
     `place(t, out, transform)` writes the posed vertices (n, 3) f32."""
 
-    def __init__(self, path, prim_path, scene_path, key):
+    def __init__(self, path, prim_path, scene_path, key, instancing="flatten"):
+        """instancing: how point instancers' copies are made (render.instancing)."""
         self.path, self.scene_path, self.key = Path(path), scene_path, key
         pxr = self.pxr = _pxr(scene_path, key)
         self.stage, cache = open_stage(path, scene_path, key)
@@ -452,7 +453,7 @@ class UsdObject:
         def meshes_under(proto_root):
             return mesh_prims(self.stage, proto_root, scene_path, key)
 
-        self.meshes = [PointInstancer(p, pxr, meshes_under, mesh_of, scene_path, key)
+        self.meshes = [PointInstancer(p, pxr, meshes_under, mesh_of, scene_path, key, instancing)
                        if p.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(p) for p in prims]
         self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
@@ -468,6 +469,9 @@ class UsdObject:
                                    for m in self.meshes]).astype(np.float32)
         # materials: a slot per distinct material, per triangle
         self.materials, slots, face_material = {}, {}, []
+        # two-level point instancers: segments (first face, end, copies; 0: not a prototype) in
+        # the flattened order, each block's copies' material slots (or None), the faces those replace
+        self.segments, self.instance_slots, self.block_static, plain, face0 = [], [], [], [], 0
         for m in self.meshes:
             per_tri, found = m.materials
             local = np.full(len(found) + 1, -1, np.int32)
@@ -475,7 +479,19 @@ class UsdObject:
                 local[j] = slots.setdefault(mat["name"], len(slots))
                 self.materials[local[j]] = mat
             face_material.append(local[per_tri])
+            if getattr(m, "two_level", False):
+                for (lo, hi), (proto, _, ids, _), copy_slots in zip(m.block_faces, m.blocks, m.block_slots):
+                    self.segments.append((face0 + lo, face0 + hi, len(ids)))
+                    self.instance_slots.append(None if copy_slots is None else local[copy_slots])
+                    self.block_static.append(proto.static)
+                plain.append(m.plain)
+            else:
+                self.segments.append((face0, face0 + len(m.faces), 0))
+                plain.append(np.zeros(len(m.faces), bool))
+            face0 += len(m.faces)
         self.face_material = np.concatenate(face_material)
+        self.plain = np.concatenate(plain)
+        self.two_level = any(copies for _, _, copies in self.segments)
         self.static = all(m.static for m in self.meshes)
         self.rigid = all(m.rigid for m in self.meshes)     # moved by transforms only
         self.rest = self._evaluate(0.0, every=True)
@@ -499,16 +515,41 @@ class UsdObject:
         return out
 
     def place(self, t, out, transform=None):
-        """Posed vertices at scene time t into out (n, 3) f32; `transform` (3, 4) on top."""
+        """Posed vertices at scene time t into out (n, 3) f32; `transform` (3, 4) on top
+        (not on a two-level instancer's prototypes: instance_matrices carries it)."""
         pts = self._evaluate(t, every=False)
         for m, o in zip(self.meshes, self.offsets):
             if m.static:
                 pts[o:o + m.n_vertices] = self.rest[o:o + m.n_vertices]
         if transform is not None:
-            pts = pts @ np.asarray(transform)[:, :3].T + np.asarray(transform)[:, 3]
+            moved = pts @ np.asarray(transform)[:, :3].T + np.asarray(transform)[:, 3]
+            for m, o in zip(self.meshes, self.offsets):
+                if getattr(m, "two_level", False):
+                    moved[o:o + m.n_vertices] = pts[o:o + m.n_vertices]
+            pts = moved
         if not np.all(np.isfinite(pts)):
             raise SceneError(self.scene_path, self.key, f"{self.path.name}: non-finite points at t = {t:g}")
         out[...] = pts
+
+
+    def instance_matrices(self, t, transform=None):
+        """Per two-level block (self.segments with copies), its copies'
+        (n_b, 3, 4) world-from-prototype matrices at scene time t, with
+        `transform` (3, 4) on top."""
+        time = self.time_code(t)
+        cache = self.pxr.UsdGeom.XformCache(time)
+        out = [b for m in self.meshes if getattr(m, "two_level", False)
+               for b in m.instance_matrices(self.pxr, time, cache)]
+        if transform is not None:
+            top = np.asarray(transform, np.float64)
+            for b in out:
+                b[:, :, 3] = b[:, :, 3] @ top[:, :3].T + top[:, 3]
+                b[:, :, :3] = np.einsum("ij,njk->nik", top[:, :3], b[:, :, :3])
+        for b in out:
+            if not np.all(np.isfinite(b)):
+                raise SceneError(self.scene_path, self.key, f"{self.path.name}: an instance transform is inf or "
+                                                            f"NaN at t = {t:g}")
+        return out
 
 
 def _lights(stage, time, pxr, notes):

@@ -8,13 +8,18 @@ transform; instances masked by invisibleIds or inactiveIds
 be hit.
 
 The copies are made into the frame's triangles (as glTF's shared meshes
-are): memory and build time grow with instances x prototype size.
+are): memory and build time grow with instances x prototype size. Or,
+two-level (render.instancing), each prototype mesh is read once, in the
+space of its prototype root, and `instance_matrices` places its copies
+(raycore/instancing traces them), each with its displayColor as its own
+material.
 
 usd.py hands in how it reads a mesh (`mesh_of`) and finds the meshes under
 a prim (`meshes_under`), so that this module does not import it back."""
 import numpy as np
 
 from anim.errors import SceneError
+from anim.instances import TWO_LEVEL_TRIANGLES
 from anim.materials import DEFAULT_MATERIAL
 from anim.memory import check_copies
 
@@ -30,7 +35,9 @@ class PointInstancer:
     """One UsdGeomPointInstancer, read as a mesh is by UsdObject: faces,
     uvs, materials, static, rigid, notes, n_vertices and evaluate()."""
 
-    def __init__(self, prim, pxr, meshes_under, mesh_of, scene_path, key):
+    def __init__(self, prim, pxr, meshes_under, mesh_of, scene_path, key, instancing="flatten"):
+        """instancing: render.instancing's choice (auto: two-level from
+        anim.instances.TWO_LEVEL_TRIANGLES copied triangles on)."""
         self.prim, self.path = prim, str(prim.GetPath())
         self.scene_path, self.key = scene_path, key
         schema = self.schema = pxr.UsdGeom.PointInstancer(prim)
@@ -65,31 +72,46 @@ class PointInstancer:
                     self._fail(f"prototype {root.GetPath()} holds point instancer {mesh_prim.GetPath()}: nested "
                                "point instancers are not supported yet")
             parts.append((root, ids, [mesh_of(m) for m in prims]))
-        check_copies(sum(len(ids) * len(m.faces) for _, ids, meshes in parts for m in meshes),
-                     f"point instancer {self.path}: {n:,} instances", scene_path, key)
+        copied = sum(len(ids) * len(m.faces) for _, ids, meshes in parts for m in meshes)
+        self.two_level = instancing == "two_level" or (instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES)
+        if not self.two_level:
+            check_copies(copied, f"point instancer {self.path}: {n:,} instances", scene_path, key)
         faces, uvs, per_tri, found, offset = [], [], [], [], 0
+        # two-level: each block's faces in self.faces, its copies' material slots (or None) and the
+        # prototype triangles those replace (no material of their own)
+        self.block_faces, self.block_slots, plain_tris = [], [], []
         for root, ids, meshes in parts:
             for mesh in meshes:
                 if mesh.skinning is not None:
                     self._fail(f"prototype mesh {mesh.path} is skinned; skinned prototypes are not supported")
                 nv = mesh.n_vertices
+                copies = 1 if self.two_level else len(ids)
                 self.blocks.append((mesh, root, ids, offset))
-                faces.append((mesh.faces[None] + (offset + np.arange(len(ids)) * nv)[:, None, None]).reshape(-1, 3))
+                face0 = sum(len(f) for f in faces)
+                faces.append((mesh.faces[None] + (offset + np.arange(copies) * nv)[:, None, None]).reshape(-1, 3))
+                self.block_faces.append((face0, face0 + len(mesh.faces)))
                 if mesh.uvs is not None:
-                    uvs.append((offset, np.tile(mesh.uvs, (len(ids), 1))))
+                    uvs.append((offset, np.tile(mesh.uvs, (copies, 1))))
                 tri, mats = mesh.materials
                 local = np.arange(len(mats) + 1) + len(found)
                 local[-1] = -1
-                slots = np.tile(np.where(tri >= 0, local[tri], -1)[None], (len(ids), 1))
+                slots = np.tile(np.where(tri >= 0, local[tri], -1)[None], (copies, 1))
                 found += mats
+                plain = np.zeros(len(tri), bool)
+                slot_of_copy = None
                 if colours is not None:
                     # the instancer's displayColor, per copy, where the prototype has no material of its own
                     plain = (tri < 0) | np.array([mats[k]["name"].startswith("displayColor") if k >= 0 else True
                                                   for k in tri], bool)
-                    slots[:, plain] = (colour_slot(colours, ids, found))[:, None]
+                    slot_of_copy = colour_slot(colours, ids, found)
+                    if not self.two_level:
+                        slots[:, plain] = slot_of_copy[:, None]
+                self.block_slots.append(slot_of_copy)
+                plain_tris.append(plain)
                 per_tri.append(slots.reshape(-1))
                 self.notes += mesh.notes
-                offset += nv * len(ids)
+                offset += nv * copies
+        self.plain = np.concatenate(plain_tris)
         self.n_vertices = offset
         if offset >= 2 ** 31:
             self._fail(f"{n} instances make {offset} vertices, more than 2^31")
@@ -173,8 +195,8 @@ class PointInstancer:
         if not self.prim.GetAttribute("positions") or not self.prim.GetAttribute("positions").HasAuthoredValue():
             self._fail("has no positions")
 
-    def evaluate(self, pxr, time, xform_cache):
-        """World-space points (n_vertices, 3) f64 at a time code."""
+    def _placement(self, pxr, time, xform_cache):
+        """(world (n, 4, 4) row-vector matrices of the instances, shown (n,) bool) at a time code."""
         PI = pxr.UsdGeom.PointInstancer
         xf = _matrix(self.schema.ComputeInstanceTransformsAtTime(time, time, PI.IncludeProtoXform, PI.IgnoreMask))
         if len(xf) != self.n_instances:
@@ -187,6 +209,27 @@ class PointInstancer:
         shown = np.ones(self.n_instances, bool) if len(mask) == 0 else np.asarray(mask, bool)
         if self.hides and pxr.UsdGeom.Imageable(self.prim).ComputeVisibility(time) == pxr.UsdGeom.Tokens.invisible:
             shown[:] = False
+        return world, shown
+
+    def instance_matrices(self, pxr, time, xform_cache):
+        """Two-level: per block, its copies' (n_b, 3, 4) world-from-prototype
+        matrices (a hidden copy's 3x3 zero)."""
+        world, shown = self._placement(pxr, time, xform_cache)
+        out = []
+        for _, _, ids, _ in self.blocks:
+            m = np.empty((len(ids), 3, 4))
+            m[:, :, :3] = np.transpose(world[ids, :3, :3], (0, 2, 1)) * shown[ids, None, None]
+            m[:, :, 3] = world[ids, 3, :3]
+            out.append(m)
+        return out
+
+    def evaluate(self, pxr, time, xform_cache):
+        """World-space points (n_vertices, 3) f64 at a time code; two-level:
+        each block's prototype mesh once, in its prototype root's space."""
+        if self.two_level:
+            return np.concatenate([mesh.evaluate(pxr, time, xform_cache, relative_to=root)
+                                   for mesh, root, _, _ in self.blocks])
+        world, shown = self._placement(pxr, time, xform_cache)
         out = np.empty((self.n_vertices, 3), np.float64)
         for mesh, root, ids, offset in self.blocks:
             local = mesh.evaluate(pxr, time, xform_cache, relative_to=root)

@@ -40,6 +40,7 @@ class Bundle(NamedTuple):
     files: dict
     digest: str
     camera: str = None        # a USD stage's or FBX file's chosen camera (render --camera)
+    instancing: str = None    # render --instancing
 
 
 def referenced_files(scene) -> list:
@@ -119,7 +120,8 @@ def bundle_scene(scene) -> Bundle:
         h.update(ref.encode())
         h.update(hashlib.sha256(files[ref]).digest())
     h.update(str(scene.camera_choice).encode())
-    return Bundle(scene.path.name, files, h.hexdigest()[:16], scene.camera_choice)
+    h.update(str(scene.instancing_choice).encode())
+    return Bundle(scene.path.name, files, h.hexdigest()[:16], scene.camera_choice, scene.instancing_choice)
 
 
 class WorkerScene(NamedTuple):
@@ -148,7 +150,7 @@ def _worker_scene(bundle: Bundle, cfg_fields: dict) -> WorkerScene:
         target = root / ref
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(data)
-    scene = AnimatedScene(root / bundle.scene_name, bundle.camera)
+    scene = AnimatedScene(root / bundle.scene_name, bundle.camera, bundle.instancing)
     cfg = RenderConfig(**cfg_fields)
     shading = shading_of(scene)
     # one cold compile per machine, not one per worker (warm_lock.py)

@@ -18,11 +18,12 @@ INT32_MAX = 2 ** 31 - 1
 
 
 @parallel_kernel
-def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, forward, inverse, identity,
-               inst_material, id_base, out_verts, out_vertices, out_normals, out_uvs, out_material, out_prim, out_id):
+def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, plain, forward, inverse,
+               identity, inst_material, id_base, out_verts, out_vertices, out_normals, out_uvs, out_material, out_prim, out_id):
     """Slot i of every hit pixel i (prim[i] >= 0, in instance inst[i]):
     out_verts (n, 9), out_vertices and out_normals (3n, 3), out_uvs (3n, 2)
-    when uvs has rows, out_material (n,); out_prim[i] = i (-1 on a miss),
+    when uvs has rows, out_material (n,): the instance's material where it
+    has one and the triangle is `plain`, else the triangle's; out_prim[i] = i (-1 on a miss),
     out_id[i] the primitive's id in the flattened world (int32, saturated)."""
     with_uv = uvs.shape[0] > 0
     for i in numba.prange(prim.shape[0]):
@@ -54,7 +55,7 @@ def place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shi
             if with_uv:
                 out_uvs[s, 0], out_uvs[s, 1] = uvs[v, 0], uvs[v, 1]
         mat = inst_material[j]
-        out_material[i] = mat if mat >= 0 else tri_material[k]
+        out_material[i] = mat if (mat >= 0 and plain[k]) else tri_material[k]
         out_id[i] = min(id_base[j] + k + tri_shift[k], INT32_MAX)
 
 
@@ -72,11 +73,13 @@ class SeenTriangles:
         self.ids = np.empty(n_pix, np.int32)
         self.faces = np.arange(3 * n_pix, dtype=np.int32).reshape(n_pix, 3)
 
-    def place(self, prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, place):
+    def place(self, prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, plain, place):
         """Slots for hits (prim, inst) of one pass (prim -1: a miss):
         (prim of the slots, verts, faces, normals, material, uvs)."""
         n = prim.shape[0]
-        place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, place.forward, place.inverse,
+        plain = np.zeros(tri_material.shape[0], np.bool_) if plain is None else plain
+        place_seen(prim, inst, tri_verts, faces, normals, uvs, tri_material, tri_shift, plain, place.forward,
+                   place.inverse,
                    place.identity, place.material, place.id_base, self.verts[:n], self.vertices[:3 * n],
                    self.normals[:3 * n], self.uvs[:3 * n], self.material[:n], self.prim[:n], self.ids[:n])
         return self.prim[:n], self.verts[:n], self.faces[:n], self.normals[:3 * n], self.material[:n], \

@@ -79,18 +79,20 @@ def _in_instance(trees, tree_root, lray, h_t, h_b1, h_b2, lprim, n, any_hit, vis
 
 
 @helper
-def _ray_hits_box(ray, h_t, r, box, i):
-    """Whether live ray r's [t_min, t_max] overlaps box i (widened as the trees' box tests)."""
-    t_in = -INF
-    t_out = INF
-    for a in range(3):
-        o = ray[OX + a, r]
-        inv = ray[IX + a, r]
-        ta = (box[i, a] - o) * inv
-        tb = (box[i, 3 + a] - o) * inv
-        t_in = max(t_in, min(ta, tb))
-        t_out = min(t_out, max(ta, tb))
-    return max(_lower(t_in), ray[TMIN, r]) <= min(_upper(t_out), h_t[r])
+def _ray_hits_box(ray, h_t, r, x0, y0, z0, x1, y1, z1):
+    """Whether ray r's [t_min, t_max] overlaps the box (x0, y0, z0)-(x1,
+    y1, z1), widened as the trees' box tests (a dead ray's never does)."""
+    ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
+    ix, iy, iz = ray[IX, r], ray[IX + 1, r], ray[IX + 2, r]
+    ax = (x0 - ox) * ix
+    bx = (x1 - ox) * ix
+    ay = (y0 - oy) * iy
+    by = (y1 - oy) * iy
+    az = (z0 - oz) * iz
+    bz = (z1 - oz) * iz
+    t_in = _lower(max(max(min(ax, bx), min(ay, by)), min(az, bz)))
+    t_out = _upper(min(min(max(ax, bx), max(ay, by)), max(az, bz)))
+    return max(t_in, ray[TMIN, r]) <= min(t_out, h_t[r])
 
 
 @helper
@@ -105,7 +107,7 @@ def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst
     buffers): a far instance seen by a few rays of a packet costs a walk
     of a few."""
     box, node_i, top_inst = top[0], top[1], top[2]
-    lray, lt, lb1, lb2, lprim, idx = local
+    lray, lt, lb1, lb2, lprim, idx, flag = local
     n_pad = min(PACKET, (n + LANES - 1) // LANES * LANES)
     for r in range(n, n_pad):                  # dead copies of ray 0 fill the last chunk
         for q in range(TMIN + 1):
@@ -143,11 +145,17 @@ def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst
             continue
         # a leaf: its instances' box, ray by ray over the chunks that reached it
         m = 0
+        x0, y0, z0 = box[i, 0], box[i, 1], box[i, 2]
+        x1, y1, z1 = box[i, 3], box[i, 4], box[i, 5]
         for ch in range(N_CHUNKS):
             if (mask >> ch) & 1:
-                for r in range(ch * LANES, min(n, ch * LANES + LANES)):
-                    if h_t[r] >= ray[TMIN, r] and _ray_hits_box(ray, h_t, r, box, i):
-                        idx[m] = r
+                c0 = ch * LANES
+                # a chunk's box tests branch-free (one vector), then its hits packed
+                for lane in range(LANES):
+                    flag[lane] = _ray_hits_box(ray, h_t, c0 + lane, x0, y0, z0, x1, y1, z1)
+                for lane in range(LANES):
+                    if flag[lane]:
+                        idx[m] = c0 + lane
                         m += 1
         if m == 0:
             continue
@@ -181,7 +189,8 @@ def world_scratch():
     return (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty(PACKET, np.int32),
             (np.empty((N_ROWS, PACKET), np.float32), np.empty(PACKET, np.float32), np.empty(PACKET, np.float32),
-             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty(PACKET, np.int64)),
+             np.empty(PACKET, np.float32), np.empty(PACKET, np.int32), np.empty(PACKET, np.int64),
+             np.empty(LANES, np.bool_)),
             np.empty((6, 3), np.float32), np.empty((6, 5), np.float32), np.empty(STACK, np.int64),
             np.empty(STACK, np.int64))
 

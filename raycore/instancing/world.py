@@ -41,6 +41,7 @@ class InstanceFrame(NamedTuple):
     material: np.ndarray     # (N,) int32: the instance's material, -1: its prototype's
     id_base: np.ndarray      # (N,) int64: primitive id of the copy's first triangle (the flattened world's)
     tri_shift: np.ndarray    # (n_t,) int64: added to a world triangle's index for its primitive id
+    plain: np.ndarray = None  # (n_t,) bool: an instance's own material replaces this triangle's (None: none do)
 
 
 class Placement(NamedTuple):

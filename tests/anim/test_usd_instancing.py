@@ -100,9 +100,9 @@ def _flat_stage(path, data):
     stage.GetRootLayer().Save()
 
 
-def _depth(path, out, frames="0:10"):
+def _depth(path, out, frames="0:10", instancing="auto"):
     res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "-q", "--no-shadows", "--res", "96x96",
-                                    "--frames", frames])
+                                    "--frames", frames, "--instancing", instancing])
     assert res.exit_code == 0, res.output
     depth = []
     for f in sorted(out.glob("*.exr")):
@@ -118,11 +118,16 @@ def _same(a, b, hits=0.05):
     assert same.mean() >= 0.999, same.mean()
 
 
-def test_a_point_instancer_has_the_depth_of_its_flattened_world(tmp_path):
+@pytest.mark.parametrize("instancing", ["flatten", "two_level"])
+def test_a_point_instancer_has_the_depth_of_its_flattened_world(tmp_path, instancing):
+    """Copied into the frame's triangles, or traced two-level (the
+    prototypes' trees, a top level over the copies, usd-core's instance
+    transforms), against the same world written without instancing."""
     data = _instance_data()
     _instanced_stage(tmp_path / "pi.usda", data)
     _flat_stage(tmp_path / "flat.usda", data)
-    got, want = _depth(tmp_path / "pi.usda", tmp_path / "a"), _depth(tmp_path / "flat.usda", tmp_path / "b")
+    got = _depth(tmp_path / "pi.usda", tmp_path / "a", instancing=instancing)
+    want = _depth(tmp_path / "flat.usda", tmp_path / "b")
     assert len(got) == 11
     _same(got, want)
     assert not np.array_equal(np.isfinite(got[0]), np.isfinite(got[10]))       # they move
@@ -282,3 +287,32 @@ def test_skinned_characters_as_instanceable_references_render_as_plain_ones(tmp_
         out.append(_depth(path, tmp_path / f"o{instanceable}", "0:6"))
     _same(out[0], out[1], hits=0.01)
     assert not np.array_equal(np.isfinite(out[1][0]), np.isfinite(out[1][6]))          # they bend
+
+
+def test_two_level_copies_take_their_display_colours(tmp_path):
+    """primvars:displayColor per instance, traced two-level: each copy's
+    colour is its own material (raycore/instancing/seen.py), so the frame
+    equals the flattened one, colour for colour."""
+    data = _instance_data()
+    path = tmp_path / "pi.usda"
+    _instanced_stage(path, data)
+    stage = Usd.Stage.Open(str(path))
+    pi = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/PI"))
+    rgb = np.random.default_rng(2).uniform(0, 1, (N, 3)).astype(np.float32)
+    UsdGeom.PrimvarsAPI(pi).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                          UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, c))
+                                                                                    for c in rgb]))
+    UsdGeom.Xform.Define(stage, "/Sun")
+    stage.Save()
+    images = []
+    for instancing in ("flatten", "two_level"):
+        out = tmp_path / instancing
+        res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "-q", "--res", "96x96", "--frames",
+                                        "0:0", "--instancing", instancing])
+        assert res.exit_code == 0, res.output
+        names, pix, _ = read_exr(str(next(out.glob("*.exr"))))
+        images.append(pix[..., [names.index(c) for c in "RGB"]])
+    flat, two = images
+    assert np.mean(np.any(flat > 0.01, axis=-1)) > 0.05
+    assert np.mean(np.abs(flat - two).max(axis=-1) < 2e-3) >= 0.995
+    assert len(np.unique(np.round(two.reshape(-1, 3), 2), axis=0)) > N
