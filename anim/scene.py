@@ -129,7 +129,7 @@ class SceneObject:
         elif spec.mesh.lower().endswith((".gltf", ".glb")):
             from anim.io.gltf import GltfObject          # pygltflib only for scenes with glTF files
             self.gltf = GltfObject(base / spec.mesh, spec.animation, spec.extrapolate, scene_path, f"{key}.mesh",
-                                   warnings)
+                                   warnings, "flatten" if spec.instances is not None else instancing)
             self.base, self.faces, self.uvs = self.gltf.rest.astype(np.float32), self.gltf.faces, self.gltf.uvs
         elif spec.mesh.lower().endswith(".fbx"):
             from anim.io.fbx import FbxObject            # a ufbx process only for scenes with FBX files
@@ -165,7 +165,8 @@ class SceneObject:
                        and all(c is None or c.constant for c in (self.translation, self.rotation, self.scale)))
         self.n_vertices = len(self.base)
         self.instances = None
-        self.two_level = self.usd is not None and self.usd.two_level     # its point instancers' copies
+        # a USD file's point instancers' or a glTF file's GPU-instanced copies, two-level
+        self.two_level = self.file is not None and getattr(self.file, "two_level", False)
         self.proto_static = self.static
         if spec.instances is not None:
             self._instance(spec, base, scene_path, key, owner, instancing)
@@ -268,7 +269,7 @@ class SceneObject:
         if self.two_level and self.instances is not None:
             return [(0, len(self.faces), self.instances.n)]
         if self.two_level:
-            return self.usd.segments
+            return self.file.segments
         return [(0, len(self.faces), 0)]
 
     def blocks(self):
@@ -276,14 +277,14 @@ class SceneObject:
         slots in the file or None)."""
         if self.instances is not None:
             return [(not self.proto_static, None)]
-        return [(not static, slots) for static, slots in zip(self.usd.block_static, self.usd.instance_slots)]
+        return [(not static, slots) for static, slots in zip(self.file.block_static, self.file.instance_slots)]
 
     def instance_matrices(self, t):
         """Per two-level prototype, its copies' (n, 3, 4) world-from-prototype matrices at time t."""
         if self.instances is not None:
             return [self.instances.matrices(t)]
         top = trs_matrix(self.translation, self.rotation, self.scale, t) if self.has_transform else None
-        return self.usd.instance_matrices(t, top)
+        return self.file.instance_matrices(t, top)
 
     def place(self, t, out):
         """Write the positions at time t into out (n_v, 3) f32 (a two-level
@@ -581,8 +582,8 @@ class AnimatedScene:
         ranges, moving, protos, id_base, materials, flat = [], [], [], [], [], 0
         for o in self.objects:
             fo, lookup = o.face_offset, getattr(o, "file_lookup", None)
-            if o.two_level and o.instances is None and lookup is not None:      # a USD file's instancers
-                self.plain[fo:fo + len(o.faces)] = o.usd.plain
+            if o.two_level and o.instances is None and lookup is not None:      # a file's instanced copies
+                self.plain[fo:fo + len(o.faces)] = o.file.plain
             blocks = iter(o.blocks() if o.two_level else ())
             for lo, hi, copies in o.segments():
                 n = hi - lo

@@ -16,7 +16,7 @@ import numpy as np
 import pygltflib
 
 from anim.errors import SceneError
-from anim.instances import quaternion_matrices
+from anim.instances import TWO_LEVEL_TRIANGLES, quaternion_matrices
 from anim.interpolate import wrap_time
 from anim.materials import pbr_material
 from anim.memory import check_copies
@@ -105,8 +105,10 @@ class GltfObject:
     """Geometry and motion of one glTF file; `place(t, out, transform)` writes
     the posed vertices (n, 3) f32."""
 
-    def __init__(self, path, animation, extrapolate, scene_path, key, warnings=None):
+    def __init__(self, path, animation, extrapolate, scene_path, key, warnings=None, instancing="flatten"):
+        """instancing: how EXT_mesh_gpu_instancing's copies are made (render.instancing)."""
         self.path, self.scene_path, self.key = Path(path), scene_path, key
+        self.instancing = instancing
         self.warnings = warnings if warnings is not None else []
         self.extrapolate = extrapolate
         try:
@@ -235,7 +237,7 @@ class GltfObject:
 
     def _meshes(self):
         doc = self.doc
-        self.instances, verts, faces, uvs, face_material = [], [], [], [], []
+        self.instances, verts, faces, uvs, face_material, pending = [], [], [], [], [], []
         offset = 0
         for node_index in self.order:
             node = doc.nodes[node_index]
@@ -255,7 +257,7 @@ class GltfObject:
                     self._fail(f"mesh {node.mesh} primitive {p_index}: bad triangle indices")
                 uv = self._primitive_uvs(prim, len(pos))
                 copies = self._gpu_instances(node_index, node)
-                inst = {"node": node_index, "offset": offset, "rest": np.ascontiguousarray(pos), "copies": copies,
+                inst = {"node": node_index, "offset": 0, "rest": np.ascontiguousarray(pos), "copies": copies,
                         "targets": [self.accessor(t["POSITION"]).astype(np.float32)
                                     for t in (prim.targets or []) if t.get("POSITION") is not None],
                         "mesh": node.mesh, "skin": None}
@@ -275,20 +277,36 @@ class GltfObject:
                         self._fail(f"mesh {node.mesh}: JOINTS_0 index beyond skin {node.skin}'s joints")
                     inst["skin"] = (np.asarray(skin.joints), ibm.astype(np.float64),
                                     np.ascontiguousarray(joint), np.ascontiguousarray(weight, np.float32))
-                if copies is not None:
-                    check_copies(len(copies) * (len(idx) // 3), f"node {node_index}: {len(copies):,} "
-                                 "EXT_mesh_gpu_instancing copies", self.scene_path, self.key)
                 if copies is not None and inst["skin"] is not None:
                     self._fail(f"node {node_index}: a skinned mesh with EXT_mesh_gpu_instancing is not supported")
-                n = 1 if copies is None else len(copies)
-                self.instances.append(inst)
-                verts.append(np.tile(pos, (n, 1)))
-                tri = idx.reshape(-1, 3).astype(np.int64)
-                faces.append((tri[None] + offset + (np.arange(n) * len(pos))[:, None, None]).reshape(-1, 3))
-                face_material.append(np.full(n * (len(idx) // 3), -1 if prim.material is None else prim.material,
-                                             np.int32))
-                uvs.append(np.tile(uv, (n, 1)))
-                offset += n * len(pos)
+                pending.append((inst, pos, idx, uv, prim.material))
+        # two-level: each instanced primitive once (its copies placed by instance_matrices)
+        copied = sum(len(inst["copies"]) * (len(idx) // 3) for inst, _, idx, _, _ in pending
+                     if inst["copies"] is not None)
+        self.two_level = copied > 0 and (self.instancing == "two_level" or
+                                         (self.instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES))
+        self.segments, face0 = [], 0
+        for inst, pos, idx, uv, material in pending:
+            copies = inst["copies"]
+            if copies is not None and not self.two_level:
+                check_copies(len(copies) * (len(idx) // 3), f"node {inst['node']}: {len(copies):,} "
+                             "EXT_mesh_gpu_instancing copies", self.scene_path, self.key)
+            inst["two_level"] = copies is not None and self.two_level
+            n = 1 if copies is None or inst["two_level"] else len(copies)
+            inst["offset"] = offset
+            self.instances.append(inst)
+            verts.append(np.tile(pos, (n, 1)))
+            tri = idx.reshape(-1, 3).astype(np.int64)
+            faces.append((tri[None] + offset + (np.arange(n) * len(pos))[:, None, None]).reshape(-1, 3))
+            face_material.append(np.full(n * len(tri), -1 if material is None else material, np.int32))
+            uvs.append(np.tile(uv, (n, 1)))
+            offset += n * len(pos)
+            self.segments.append((face0, face0 + n * len(tri), len(copies) if inst["two_level"] else 0))
+            face0 += n * len(tri)
+        blocks = [inst for inst in self.instances if inst["two_level"]]
+        self.block_static = [not inst["targets"] for inst in blocks]     # morph targets may move a prototype
+        self.instance_slots = [None] * len(blocks)
+        self.plain = np.zeros(face0, bool)
         if not self.instances:
             self._fail("the scene has no triangle meshes")
         self.n_vertices = offset
@@ -518,8 +536,8 @@ class GltfObject:
         return self.static or (all(i["skin"] is None for i in self.instances)
                                and not any(path == "weights" for _, path, _ in self.channels))
 
-    def place(self, t, out, transform=None):
-        """Posed vertices at time t into out (n, 3) f32; `transform` (3, 4) on top."""
+    def _pose(self, t):
+        """(world (n_nodes, 4, 4) matrices, {node: morph weights}) at time t."""
         t = wrap_time(t, self.t0, self.t1, self.extrapolate)
         trans, rot, scale = self.rest_t.copy(), self.rest_r.copy(), self.rest_s.copy()
         weights = {}
@@ -542,6 +560,22 @@ class GltfObject:
                 local[:3, 3] = trans[i]
             p = self.parent[i]
             world[i] = local if p < 0 else world[p] @ local
+        return world, weights
+
+    def instance_matrices(self, t, transform=None):
+        """Two-level: per instanced primitive, its copies' (n, 3, 4) matrices
+        at time t (the node's world transform after each copy's own, and
+        `transform` on top)."""
+        world, _ = self._pose(t)
+        top = np.eye(4)
+        if transform is not None:
+            top[:3] = transform
+        return [(top @ world[inst["node"]] @ inst["copies"])[:, :3] for inst in self.instances if inst["two_level"]]
+
+    def place(self, t, out, transform=None):
+        """Posed vertices at time t into out (n, 3) f32; `transform` (3, 4) on top
+        (a two-level primitive's stay in its mesh's space: instance_matrices)."""
+        world, weights = self._pose(t)
         top = np.eye(4)
         if transform is not None:
             top[:3] = transform
@@ -554,7 +588,9 @@ class GltfObject:
                     rest = rest + wk * target
                 rest = np.ascontiguousarray(rest, np.float32)
             dst = out[inst["offset"]:inst["offset"] + len(rest)]
-            if inst["skin"] is not None:
+            if inst["two_level"]:
+                dst[...] = rest
+            elif inst["skin"] is not None:
                 joints, ibm, joint, weight = inst["skin"]
                 mats = np.einsum("ab,jbc,jcd->jad", top, world[joints], ibm)[:, :3]
                 skin_into(rest, joint, weight, np.ascontiguousarray(mats), dst)

@@ -327,3 +327,38 @@ def test_auto_instancing_copies_small_tables_and_traces_large_ones_two_level(tmp
     scene = AnimatedScene(path)
     assert [o.name for o in scene.two_level] == ["boxes"]
     assert scene.faces.shape[0] == 2 + 12 and scene.flat_triangles == 2 + N * 12
+
+
+def test_gltf_gpu_instancing_two_level_places_the_copies_the_flattened_frame_has(tmp_path):
+    """EXT_mesh_gpu_instancing traced two-level: the primitive once, each
+    copy's matrix node_world @ T_i R_i S_i (scipy's rotations as the
+    oracle) while the node moves, and the frames those of the copies made
+    into triangles."""
+    from scipy.spatial.transform import Rotation
+    from anim.scene import AnimatedScene
+    from conftest import icosphere_mesh
+    from tests.gltf_files import GltfBuilder
+    rng = np.random.default_rng(4)
+    v, f = icosphere_mesh(2, 0.4)
+    n = 40
+    tr, q, sc = rng.uniform(-3, 3, (n, 3)) * [1, 0.6, 0.5], rng.normal(size=(n, 4)), rng.uniform(0.5, 1.5, (n, 3))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    b = GltfBuilder()
+    mesh = b.mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32).reshape(-1))
+    attrs = {"TRANSLATION": b.accessor(tr), "ROTATION": b.accessor(q), "SCALE": b.accessor(sc)}
+    node = b.node(mesh=mesh, extensions={"EXT_mesh_gpu_instancing": {"attributes": attrs}})
+    b.animation([(node, "translation", np.array([0.0, 1.0]), np.array([[0, 0, 0], [0, 0, 2.0]]), "LINEAR")])
+    b.doc.extensionsUsed = ["EXT_mesh_gpu_instancing"]
+    b.save(tmp_path / "copies.glb", [node])
+    (tmp_path / "ground.obj").write_text("v -9 -2 -9\nv 9 -2 -9\nv 9 -2 9\nv -9 -2 9\nf 1 3 2\nf 1 4 3\n")
+    path = tmp_path / "g.yaml"
+    path.write_text(HEAD.replace("[48, 48]", "[96, 80]") + "  - name: ground\n    mesh: ground.obj\n"
+                    "  - name: copies\n    mesh: copies.glb\n")
+    scene = AnimatedScene(path, instancing="two_level")
+    assert len(scene.faces) == 2 + len(f) and scene.flat_triangles == 2 + n * len(f)
+    for t in (0.0, 0.5):
+        m = scene.instances_at(t).matrices
+        np.testing.assert_allclose(m[:, :, :3], Rotation.from_quat(q).as_matrix() * sc[:, None, :], atol=1e-6)
+        np.testing.assert_allclose(m[:, :, 3], tr + [0, 0, 2 * t], atol=1e-6)
+    times = [0.0, 0.5]
+    _agree(_frames(path, "flatten", times, aovs=("id",), accel="bvh"), _frames(path, "two_level", times, aovs=("id",)))
