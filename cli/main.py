@@ -359,6 +359,27 @@ def _bench_scale(sizes_text, res, n_frames, threads, accel, json_path, plot_path
         click.echo(f"wrote {plot_path}")
 
 
+def _bench_instances(counts_text, res, n_frames, threads, json_path):
+    """bench --instances: the counts one after another, a line each as it ends."""
+    import json
+    import tempfile
+
+    from anim.measure.instanced import run_instances
+
+    from cli.report import instances_table
+    counts = _int_list(counts_text, "--instances")
+    if min(counts) < 1:
+        raise click.BadParameter("counts of one instance or more", param_hint="--instances")
+    with tempfile.TemporaryDirectory(prefix="frustrace-instances-") as tmp:
+        result = run_instances(sorted(counts), res, n_frames, threads, Path(tmp),
+                               on_count=lambda row: click.echo(f"bench --instances: {row['instances']:,} copies, "
+                                                               f"{row['frame_ms']:.1f} ms a frame", err=True))
+    result.update({"resolution": res, "frames": n_frames, "threads": threads})
+    instances_table(result)
+    if json_path:
+        json_path.write_text(json.dumps(result, indent=1))
+
+
 def _int_list(text, name, allowed=None):
     try:
         values = [int(v) for v in text.split(",") if v.strip()]
@@ -410,8 +431,12 @@ def _int_list(text, name, allowed=None):
                    "phase's growth exponent (minutes at a million triangles and more).")
 @click.option("--scale-sizes", default="100000,300000,1000000", show_default=True, metavar="N,N,..",
               help="With --scale: the mesh sizes in triangles.")
+@click.option("--instances", "instance_counts", metavar="N,N,..",
+              help="Instead of the scenes: frame cost by phase and peak memory of N copies of a "
+                   "10,000-triangle prototype traced two-level (100000: a billion triangles), the same "
+                   "world flattened beside it up to 20M triangles (e.g. 1000,10000,100000).")
 def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_path, error_report, quick, plot_path,
-          peers, scale, scale_sizes):
+          peers, scale, scale_sizes, instance_counts):
     """Measure fps per phase (interp, build, trace, shade, shadow, write) on built-in scenes,
     or with --error the interpolation error against run time."""
     import json
@@ -440,6 +465,8 @@ def bench(scenes, res, n_frames, accel, shadow_accels, packets, threads, json_pa
     if scale:
         return _bench_scale(scale_sizes, res or 1024, n_frames, threads, accel if accel != "grid" else None,
                             json_path, plot_path)
+    if instance_counts:
+        return _bench_instances(instance_counts, res or 1024, n_frames, threads, json_path)
     if error_report:
         from anim.measure.error_study import run_error_report
         from anim.measure.image_error import RES as IMAGE_STUDY_RES

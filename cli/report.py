@@ -184,6 +184,31 @@ def scale_table(result, console=None):
                                columns, cells, console.width, key=("triangles",)))
 
 
+def instances_table(result, console=None):
+    """bench --instances: a row per count (two-level phases, memory, the
+    flattened world's frame where it was measured), then the growth."""
+    columns = [("instances", None), ("triangles", 2), ("interp", 3), ("build", None), ("trace", None),
+               ("shade", None), ("shadow", None), ("frame", None), ("frame 0 warm-up s", 1),
+               ("peak RSS GB", None), ("flattened: frame / build / peak RSS GB", 0)]
+    cells = []
+    for r in result["rows"]:
+        f = r.get("flat")
+        cells.append([f"{r['instances']:,}", f"{r['triangles']:,}", f"{r['interp_ms']:.1f}", f"{r['build_ms']:.1f}",
+                      f"{r['trace_ms']:.1f}", f"{r['shade_ms']:.1f}", f"{r['shadow_ms']:.1f}",
+                      f"{r['frame_ms']:.1f}", f"{r['warm_up_s']:.1f}", f"{r['peak_rss_gb']:.2f}",
+                      f"{f['frame_ms']:.0f} / {f['build_ms']:.0f} / {f['peak_rss_gb']:.2f}" if f else "-"])
+    g = result["growth"]
+    cells.append(["growth exponent", "", *(f"{g[k]:.2f}" if g[k] is not None else "-"
+                                           for k in ("interp_ms", "build_ms", "trace_ms", "shade_ms", "shadow_ms",
+                                                     "frame_ms")), "", "", ""])
+    per = result.get("bytes_per_instance")
+    console = console or (Console() if Console().is_terminal else Console(width=190))
+    console.print(fitted_table(f"frustrace bench --instances ({result['resolution']}^2, {result['frames']} frames, "
+                               "median ms a frame, two-level"
+                               + (f"; {per:,.0f} bytes of peak RSS an instance" if per is not None else "") + ")",
+                               columns, cells, console.width, key=("instances",)))
+
+
 def compare_table(result, console=None):
     """One row per structure, then the image differences against the first."""
     rows = result["rows"]

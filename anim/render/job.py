@@ -139,7 +139,7 @@ def render_animation(job: RenderJob, on_frame=None, warn=None, should_stop=None,
         # on a cluster the workers' own warm-ups fall inside it
         wall_s = time.perf_counter() - wall0 - extra["warm_up_s"]
         if client is None:               # this process's memory (a cluster's workers report none)
-            extra.update(peak_report(scene.faces.shape[0], scene.key_bytes))
+            extra.update(peak_report(scene.flat_triangles, scene.key_bytes))
         run = {"started": started, "frames_rendered": len(rows), "wall_s": wall_s, **extra, "ended": ended, **settings_of(cfg)}
         try:
             stats = write_stats(job.stats_path, scene, cfg, rows, run,
