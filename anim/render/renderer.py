@@ -51,10 +51,9 @@ class SceneRenderer:
         """(interp_ms, FrameResult) of the frame at time t."""
         scene = self.scene
         t0 = time.perf_counter()
-        vertices = scene.vertices_at(t)
+        geom = self.geometry(t, scene.vertices_at(t))           # an instanced world's instances too
         pose = CameraPose(*scene.camera_at(t))
         interp_ms = (time.perf_counter() - t0) * 1e3
-        geom = self.geometry(t, vertices)
         motion = self.shutter(t)
         result = render_frame(geom, self.shading, pose, self.cfg, self.buffers, self.structures, motion=motion)
         return interp_ms + (motion.interp_ms if motion else 0.0), result
