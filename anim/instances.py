@@ -18,11 +18,24 @@ from anim.interpolate import Curve, locate
 from anim.track_kernels import instance_matrices
 from anim.tracks import FLOAT32_LIMIT, check_times
 
-# render.instancing: auto traces an object's instances two-level (its
-# prototype's tree under a top level, raycore/instancing) from this many
-# copied triangles on, and copies them into the frame's triangles below
-# (docs/performance.md, instancing: the flat copies are faster while small)
-TWO_LEVEL_TRIANGLES = 1_000_000
+# render.instancing: auto traces copies two-level (their prototype's tree
+# under a top level, raycore/instancing) from TWO_LEVEL_TRIANGLES copied
+# triangles on, and from TWO_LEVEL_TRIANGLES_LARGE on when the prototypes
+# hold LARGE_PROTOTYPE triangles or more; below, copying them into the
+# frame's triangles is as fast or faster (measured, docs/performance.md:
+# 100-triangle copies break even at 3.2M, 10,000-triangle ones at ~0.3M)
+TWO_LEVEL_TRIANGLES = 3_000_000
+TWO_LEVEL_TRIANGLES_LARGE = 1_000_000
+LARGE_PROTOTYPE = 1_000
+
+
+def two_level(instancing, copied, copies):
+    """Whether copies totalling `copied` triangles are traced two-level
+    under render.instancing = instancing (auto, flatten, two_level)."""
+    if instancing != "auto":
+        return instancing == "two_level"
+    return copied >= TWO_LEVEL_TRIANGLES or (copied >= TWO_LEVEL_TRIANGLES_LARGE
+                                             and copied >= LARGE_PROTOTYPE * max(copies, 1))
 
 
 def quaternion_matrices(q):

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 
 from anim.area_lights import emitter_positions
 from anim.errors import SceneError
-from anim.instances import TWO_LEVEL_TRIANGLES, InstanceTable
+from anim.instances import InstanceTable, two_level
 from anim.keyframes import KeyStore, LinearKeys
 from anim.memory import check_copies
 from anim.interpolate import Curve
@@ -179,7 +179,7 @@ class SceneObject:
         frame's triangles and the copies as its instances (instances_at)."""
         table = InstanceTable(spec.instances, base, scene_path, f"{key}.instances", owner, spec.extrapolate)
         copied = table.n * len(self.faces)
-        if instancing == "two_level" or (instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES):
+        if two_level(instancing, copied, table.n):
             self.instances, self.two_level = table, True
             self.static = self.static and table.constant
             return

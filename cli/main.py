@@ -253,7 +253,7 @@ CAMERA_HELP = ("For a USD stage: the camera prim to look through (default: the s
 @click.option("--instancing", type=click.Choice(("auto", "flatten", "two_level")),
               help="Instances (instances:, USD point instancers): copied into the frame's triangles (flatten), "
                    "or traced as a prototype's tree per instance under a top level (two_level); auto: two-level "
-                   "from 1M copied triangles on (default: render.instancing, auto).")
+                   "from 3M copied triangles on, 1M for prototypes of 1,000 or more (default: render.instancing, auto).")
 def render(anim_yaml, camera, out_dir, frames_text, stats_path, resume, overwrite, quiet, preview_path, workers,
            scheduler, chunk, tls_ca, tls_cert, tls_key, instancing, **settings):
     """Render ANIM_YAML (a scene file, a USD stage: .usd, .usda, .usdc,

@@ -16,7 +16,7 @@ import numpy as np
 import pygltflib
 
 from anim.errors import SceneError
-from anim.instances import TWO_LEVEL_TRIANGLES, quaternion_matrices
+from anim.instances import quaternion_matrices, two_level
 from anim.interpolate import wrap_time
 from anim.materials import pbr_material
 from anim.memory import check_copies
@@ -283,8 +283,8 @@ class GltfObject:
         # two-level: each instanced primitive once (its copies placed by instance_matrices)
         copied = sum(len(inst["copies"]) * (len(idx) // 3) for inst, _, idx, _, _ in pending
                      if inst["copies"] is not None)
-        self.two_level = copied > 0 and (self.instancing == "two_level" or
-                                         (self.instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES))
+        n_copies = sum(len(inst["copies"]) for inst, *_ in pending if inst["copies"] is not None)
+        self.two_level = copied > 0 and two_level(self.instancing, copied, n_copies)
         self.segments, face0 = [], 0
         for inst, pos, idx, uv, material in pending:
             copies = inst["copies"]

@@ -19,7 +19,7 @@ a prim (`meshes_under`), so that this module does not import it back."""
 import numpy as np
 
 from anim.errors import SceneError
-from anim.instances import TWO_LEVEL_TRIANGLES
+from anim.instances import two_level
 from anim.materials import DEFAULT_MATERIAL
 from anim.memory import check_copies
 
@@ -36,8 +36,8 @@ class PointInstancer:
     uvs, materials, static, rigid, notes, n_vertices and evaluate()."""
 
     def __init__(self, prim, pxr, meshes_under, mesh_of, scene_path, key, instancing="flatten"):
-        """instancing: render.instancing's choice (auto: two-level from
-        anim.instances.TWO_LEVEL_TRIANGLES copied triangles on)."""
+        """instancing: render.instancing's choice (auto: as
+        anim.instances.two_level measured it)."""
         self.prim, self.path = prim, str(prim.GetPath())
         self.scene_path, self.key = scene_path, key
         schema = self.schema = pxr.UsdGeom.PointInstancer(prim)
@@ -73,7 +73,7 @@ class PointInstancer:
                                "point instancers are not supported yet")
             parts.append((root, ids, [mesh_of(m) for m in prims]))
         copied = sum(len(ids) * len(m.faces) for _, ids, meshes in parts for m in meshes)
-        self.two_level = instancing == "two_level" or (instancing == "auto" and copied >= TWO_LEVEL_TRIANGLES)
+        self.two_level = two_level(instancing, copied, n)
         if not self.two_level:
             check_copies(copied, f"point instancer {self.path}: {n:,} instances", scene_path, key)
         faces, uvs, per_tri, found, offset = [], [], [], [], 0

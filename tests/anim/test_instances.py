@@ -319,11 +319,18 @@ def test_two_level_under_motion_blur_and_an_error_budget(tmp_path):
 
 
 def test_auto_instancing_copies_small_tables_and_traces_large_ones_two_level(tmp_path, monkeypatch):
-    import anim.scene as scene_module
+    """auto: two-level from 3M copied triangles, or from 1M when the
+    prototypes are large (as measured); the rule, then a scene under it."""
+    import anim.instances as instances
+    from anim.instances import two_level
     from anim.scene import AnimatedScene
+    assert not two_level("auto", 2_999_999, 30_000) and two_level("auto", 3_000_000, 30_000)
+    assert not two_level("auto", 999_999, 100) and two_level("auto", 1_000_000, 100)
+    assert not two_level("auto", 1_500_000, 10_000)                # 150-triangle copies
+    assert two_level("two_level", 1, 1) and not two_level("flatten", 10 ** 9, 10)
     path = _field(tmp_path)
     assert not AnimatedScene(path).two_level                  # 9 copies of 12 triangles: copied
-    monkeypatch.setattr(scene_module, "TWO_LEVEL_TRIANGLES", N * 12)
+    monkeypatch.setattr(instances, "TWO_LEVEL_TRIANGLES", N * 12)
     scene = AnimatedScene(path)
     assert [o.name for o in scene.two_level] == ["boxes"]
     assert scene.faces.shape[0] == 2 + 12 and scene.flat_triangles == 2 + N * 12
