@@ -80,20 +80,25 @@ def eval_slerp(t, times, quats, key_start, loop, out):
 
 
 @kernel
-def slerp_into(q0, q1, u, out):
-    """The one slerp of unit quaternions (any component order): out = the
-    shortest-arc interpolation at u in [0, 1], unit length. Nearly equal keys
-    fall back to a normalised lerp (no division by sin(angle) ~ 0)."""
-    d = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+def slerp_weights(d, u):
+    """(w0, w1): the shortest-arc slerp at u in [0, 1] of unit quaternions
+    whose dot product is d is w0 q0 + w1 q1 (then normalised). Nearly
+    equal keys fall back to a normalised lerp (no division by sin(angle) ~ 0)."""
     sign = 1.0
     if d < 0.0:
         sign, d = -1.0, -d
     if d > 1.0 - 1e-10:
-        w0, w1 = 1.0 - u, u * sign
-    else:
-        ang = np.arccos(min(d, 1.0))
-        w0 = np.sin((1.0 - u) * ang) / np.sin(ang)
-        w1 = sign * np.sin(u * ang) / np.sin(ang)
+        return 1.0 - u, u * sign
+    ang = np.arccos(min(d, 1.0))
+    return np.sin((1.0 - u) * ang) / np.sin(ang), sign * np.sin(u * ang) / np.sin(ang)
+
+
+@kernel
+def slerp_into(q0, q1, u, out):
+    """The one slerp of unit quaternions (any component order): out = the
+    shortest-arc interpolation at u in [0, 1], unit length. Nearly equal keys
+    fall back to a normalised lerp (no division by sin(angle) ~ 0)."""
+    w0, w1 = slerp_weights(q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3], u)
     n = 0.0
     for i in range(4):
         out[i] = w0 * q0[i] + w1 * q1[i]
@@ -159,16 +164,7 @@ def instance_matrices(q0, q1, u, translation, scale, visible, out):
     for i in prange(out.shape[0]):
         a0, a1, a2, a3 = q0[i, 0], q0[i, 1], q0[i, 2], q0[i, 3]
         b0, b1, b2, b3 = q1[i, 0], q1[i, 1], q1[i, 2], q1[i, 3]
-        d = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3
-        sign = 1.0
-        if d < 0.0:
-            sign, d = -1.0, -d
-        if d > 1.0 - 1e-10:
-            w0, w1 = 1.0 - u, u * sign
-        else:
-            ang = np.arccos(min(d, 1.0))
-            w0 = np.sin((1.0 - u) * ang) / np.sin(ang)
-            w1 = sign * np.sin(u * ang) / np.sin(ang)
+        w0, w1 = slerp_weights(a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3, u)
         w, x, y, z = w0 * a0 + w1 * b0, w0 * a1 + w1 * b1, w0 * a2 + w1 * b2, w0 * a3 + w1 * b3
         n = np.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w / n, x / n, y / n, z / n

@@ -294,24 +294,30 @@ def _ia_misses(box, i, ia):
 
 
 @helper
+def ray_hits_box(ray, h_t, r, x0, y0, z0, x1, y1, z1):
+    """True when ray r's [t_min, t_max] overlaps the box (x0, y0, z0)-(x1,
+    y1, z1), its entry and exit widened by EPS_BOX (a dead ray's never does)."""
+    ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
+    ix, iy, iz = ray[IX, r], ray[IY, r], ray[IZ, r]
+    ax = (x0 - ox) * ix
+    bx = (x1 - ox) * ix
+    ay = (y0 - oy) * iy
+    by = (y1 - oy) * iy
+    az = (z0 - oz) * iz
+    bz = (z1 - oz) * iz
+    t_in = _lower(max(max(min(ax, bx), min(ay, by)), min(az, bz)))
+    t_out = _upper(min(min(max(ax, bx), max(ay, by)), max(az, bz)))
+    return max(t_in, ray[TMIN, r]) <= min(t_out, h_t[r])
+
+
+@helper
 def _chunk_hits_box(ray, h_t, c0, x0, y0, z0, x1, y1, z1):
     """True when some ray of the LANES rays from c0 on has its [t_min,
     t_max] overlap the box (x0, y0, z0)-(x1, y1, z1): a branch-free loop of
     a constant LANES iterations, one AVX-512 vector."""
     hit = False
     for lane in range(LANES):
-        r = c0 + lane
-        ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
-        ix, iy, iz = ray[IX, r], ray[IY, r], ray[IZ, r]
-        ax = (x0 - ox) * ix
-        bx = (x1 - ox) * ix
-        ay = (y0 - oy) * iy
-        by = (y1 - oy) * iy
-        az = (z0 - oz) * iz
-        bz = (z1 - oz) * iz
-        t_in = _lower(max(max(min(ax, bx), min(ay, by)), min(az, bz)))
-        t_out = _upper(min(min(max(ax, bx), max(ay, by)), max(az, bz)))
-        hit = hit | (max(t_in, ray[TMIN, r]) <= min(t_out, h_t[r]))
+        hit = hit | ray_hits_box(ray, h_t, c0 + lane, x0, y0, z0, x1, y1, z1)
     return hit
 
 

@@ -52,6 +52,42 @@ def scratch():
             np.empty((6, 5), np.float32), np.empty(STACK, np.int64))
 
 
+@helper
+def load_batch_packet(ray, h_t, h_b1, h_b2, prim, order, base, n, origin, direction, t_min, t_max, shared):
+    """Rays order[base..base+n) of a batch (origin, direction: (3, n) SoA)
+    into a packet; shared: every ray starts at the first one's origin (not
+    gathered ray by ray)."""
+    i0 = order[base]
+    for r in range(n):
+        i = order[base + r]
+        j = i0 if shared else i
+        ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
+        ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
+        ray[TMIN, r] = t_min[i]
+        h_t[r] = t_max[i]
+        h_b1[r] = F0
+        h_b2[r] = F0
+        prim[r] = -1
+
+
+@helper
+def store_batch_packet(h_t, h_b1, h_b2, prim, order, base, n, want_hits, want_vis, out_t, out_prim, out_b1,
+                       out_b2, vis):
+    """A packet's results back to rays order[base..base+n): hits (prim: the
+    triangle ids, -1 none) and/or visibility (a loaded ray is live, t_max >=
+    t_min: -inf means occluded)."""
+    for r in range(n):
+        i = order[base + r]
+        k = prim[r]
+        if want_vis:
+            vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
+        if want_hits:
+            out_prim[i] = k
+            out_t[i] = h_t[r] if k >= 0 else INF
+            out_b1[i] = h_b1[r]
+            out_b2[i] = h_b2[r]
+
+
 @kernel
 def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, mode, queue, out_t, out_prim,
                 out_b1, out_b2, vis, counters):
@@ -73,31 +109,15 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
             break
         base = p * PACKET
         n = min(PACKET, n_active - base)
-        i0 = order[base]
-        shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
-        for r in range(n):
-            i = order[base + r]
-            j = i0 if shared else i
-            ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, j], origin[1, j], origin[2, j]
-            ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
-            ray[TMIN, r] = t_min[i]
-            h_t[r] = t_max[i]
-            h_b1[r] = F0
-            h_b2[r] = F0
-            prim[r] = -1
+        load_batch_packet(ray, h_t, h_b1, h_b2, prim, order, base, n, origin, direction, t_min, t_max,
+                          mode == SHARED_ORIGIN)
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, any_hit, vis_only, mode, ia, planes, stack,
                       counters, p)
-        for r in range(n):
-            i = order[base + r]
-            k = prim[r]
-            if want_vis:
-                # loaded rays are live (t_max >= t_min): -inf means occluded
-                vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
-            if want_hits:
-                out_prim[i] = bvh.tri[k] if k >= 0 else -1
-                out_t[i] = h_t[r] if k >= 0 else INF
-                out_b1[i] = h_b1[r]
-                out_b2[i] = h_b2[r]
+        if want_hits:
+            for r in range(n):
+                prim[r] = bvh.tri[prim[r]] if prim[r] >= 0 else -1
+        store_batch_packet(h_t, h_b1, h_b2, prim, order, base, n, want_hits, want_vis, out_t, out_prim, out_b1,
+                           out_b2, vis)
 
 
 @helper

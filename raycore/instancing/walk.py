@@ -16,11 +16,10 @@ at a time, and a chunk that misses an instance's box skips it.
 import numpy as np
 
 from raycore.bvh.nodes import CHILD, COUNT, STACK
-from raycore.bvh.packets import (CHUNK_BITS, DX, DY, DZ, HINT_BITS, IX, LANES, N_CHUNKS, NODE_SHIFT, OX, OY, OZ, PACKET,
-                                 SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, TMIN, N_ROWS, _chunks_hitting_box, _lower,
-                                 _push_children, _upper,
-                                 set_inverse, trace_single, walk_packet)
-from raycore.bvh.trace import _load_light_rays, load_camera_tile
+from raycore.bvh.packets import (CHUNK_BITS, DX, DY, DZ, HINT_BITS, LANES, N_CHUNKS, NODE_SHIFT, OX, OY, OZ, PACKET,
+                                 SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, TMIN, N_ROWS, _chunks_hitting_box,
+                                 _push_children, ray_hits_box, set_inverse, trace_single, walk_packet)
+from raycore.bvh.trace import _load_light_rays, load_batch_packet, load_camera_tile, store_batch_packet
 from raycore.config import EPS_OFFSET_ULPS
 from raycore.jit.counters import FALLBACK_RAYS, N_COUNTERS, PACKETS, VISITS
 from raycore.jit.floats import F0, F1, INF
@@ -76,23 +75,6 @@ def _in_instance(trees, tree_root, lray, h_t, h_b1, h_b2, lprim, n, any_hit, vis
             h_t[r] = -INF if vis_only else t
             lprim[r], h_b1[r], h_b2[r] = k, b1, b2
         counters[row, FALLBACK_RAYS] += 1
-
-
-@helper
-def _ray_hits_box(ray, h_t, r, x0, y0, z0, x1, y1, z1):
-    """Whether ray r's [t_min, t_max] overlaps the box (x0, y0, z0)-(x1,
-    y1, z1), widened as the trees' box tests (a dead ray's never does)."""
-    ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
-    ix, iy, iz = ray[IX, r], ray[IX + 1, r], ray[IX + 2, r]
-    ax = (x0 - ox) * ix
-    bx = (x1 - ox) * ix
-    ay = (y0 - oy) * iy
-    by = (y1 - oy) * iy
-    az = (z0 - oz) * iz
-    bz = (z1 - oz) * iz
-    t_in = _lower(max(max(min(ax, bx), min(ay, by)), min(az, bz)))
-    t_out = _upper(min(min(max(ax, bx), max(ay, by)), max(az, bz)))
-    return max(t_in, ray[TMIN, r]) <= min(t_out, h_t[r])
 
 
 @helper
@@ -152,7 +134,7 @@ def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst
                 c0 = ch * LANES
                 # a chunk's box tests branch-free (one vector), then its hits packed
                 for lane in range(LANES):
-                    flag[lane] = _ray_hits_box(ray, h_t, c0 + lane, x0, y0, z0, x1, y1, z1)
+                    flag[lane] = ray_hits_box(ray, h_t, c0 + lane, x0, y0, z0, x1, y1, z1)
                 for lane in range(LANES):
                     if flag[lane]:
                         idx[m] = c0 + lane
@@ -248,32 +230,16 @@ def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direct
             break
         base = p * PACKET
         n = min(PACKET, n_active - base)
-        i0 = order[base]
-        shared = mode == SHARED_ORIGIN          # one origin: not gathered ray by ray
-        for r in range(n):
-            i = order[base + r]
-            o = i0 if shared else i
-            ray[OX, r], ray[OY, r], ray[OZ, r] = origin[0, o], origin[1, o], origin[2, o]
-            ray[DX, r], ray[DY, r], ray[DZ, r] = direction[0, i], direction[1, i], direction[2, i]
-            ray[TMIN, r] = t_min[i]
-            h_t[r] = t_max[i]
-            h_b1[r] = F0
-            h_b2[r] = F0
-            prim[r] = -1
+        load_batch_packet(ray, h_t, h_b1, h_b2, prim, order, base, n, origin, direction, t_min, t_max,
+                          mode == SHARED_ORIGIN)
         walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only,
                    mode, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
-        for r in range(n):
-            i = order[base + r]
-            k = prim[r]
-            if want_vis:
-                vis[i] = F0 if (k >= 0 or h_t[r] == -INF) else F1
-            if want_hits:
-                out_prim[i] = k if k >= 0 else -1
-                out_inst[i] = inst[r] if k >= 0 else -1
-                out_t[i] = h_t[r] if k >= 0 else INF
-                out_b1[i] = h_b1[r]
-                out_b2[i] = h_b2[r]
+        store_batch_packet(h_t, h_b1, h_b2, prim, order, base, n, want_hits, want_vis, out_t, out_prim, out_b1,
+                           out_b2, vis)
+        if want_hits:
+            for r in range(n):
+                out_inst[order[base + r]] = inst[r] if prim[r] >= 0 else -1
 
 
 @kernel
