@@ -61,14 +61,14 @@ _UniqueKeyLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
-def read_scene_file(path, camera=None, notes=None) -> SceneFile:
+def read_scene_file(path, camera=None, notes=None, instancing="auto") -> SceneFile:
     """The validated scene of a scene file, or of a whole USD stage or FBX
     file (with `camera`, a camera's prim path or node name; what the file
-    gave appended to notes)."""
+    gave appended to notes; instancing: how a stage's instances are traced)."""
     path = Path(path)
     if is_usd(path) or path.suffix.lower() == ".fbx":
         if is_usd(path):
-            data, file_notes = scene_of_stage(path, camera)
+            data, file_notes = scene_of_stage(path, camera, instancing)
         else:
             from anim.io.fbx_scene import scene_of_fbx          # a ufbx process only for FBX files
             data, file_notes = scene_of_fbx(path, camera)
@@ -262,10 +262,11 @@ class SceneObject:
                                           for c in curves)
 
     def segments(self):
-        """(first face, end, copies) of the object's faces in the order the
-        flattened world numbers them: copies > 0 for a two-level prototype
-        (its faces once here, each copy's in the flattened world), 0 for
-        faces placed as they are."""
+        """(first face, end, copies[, where]) of the object's faces: copies >
+        0 for a two-level prototype (its faces once here, each copy's in the
+        flattened world), 0 for faces placed as they are; `where` (a file's):
+        each copy's (or the faces') first triangle in the flattened object,
+        else they follow one another in this order."""
         if self.two_level and self.instances is not None:
             return [(0, len(self.faces), self.instances.n)]
         if self.two_level:
@@ -324,7 +325,7 @@ class AnimatedScene:
         self.path = Path(path)
         self.camera_choice, self.instancing_choice = camera, instancing
         self.notes = []            # what a USD stage gave and what came from defaults (`check`)
-        self.spec = read_scene_file(self.path, camera, self.notes)
+        self.spec = read_scene_file(self.path, camera, self.notes, instancing or "auto")
         spec = self.spec
         # materials: the file's, plus a default for objects that name none
         self.material_names = list(spec.materials)
@@ -585,20 +586,25 @@ class AnimatedScene:
             if o.two_level and o.instances is None and lookup is not None:      # a file's instanced copies
                 self.plain[fo:fo + len(o.faces)] = o.file.plain
             blocks = iter(o.blocks() if o.two_level else ())
-            for lo, hi, copies in o.segments():
+            size = 0                      # the object's triangles in the flattened world
+            for seg in o.segments():
+                lo, hi, copies = seg[:3]
                 n = hi - lo
+                # where the flattened world numbers them: as given (a file's order), else one after another
+                at = seg[3] if len(seg) > 3 else size + np.arange(max(copies, 1), dtype=np.int64) * n
                 if copies:
                     deforms, slots = next(blocks)
-                    id_base.append(flat + np.arange(copies, dtype=np.int64) * n - (fo + lo))
+                    id_base.append(flat + at - (fo + lo))
                     protos.append(np.full(copies, len(ranges), np.int32))
                     ranges.append((fo + lo, fo + hi))
                     moving.append(deforms)
                     materials.append(np.full(copies, -1, np.int32) if slots is None or lookup is None
                                      else lookup[slots].astype(np.int32))
-                    flat += copies * n
+                    size += copies * n
                 else:
-                    self.tri_shift[fo + lo:fo + hi] = flat - (fo + lo)
-                    flat += n
+                    self.tri_shift[fo + lo:fo + hi] = flat + at[0] - (fo + lo)
+                    size += n
+            flat += size
         self.flat_triangles = flat
         self.proto_ranges = np.array(ranges, np.int64).reshape(-1, 2)
         self.proto_moving = np.array(moving, bool)
@@ -619,8 +625,8 @@ class AnimatedScene:
     def world_ranges(self):
         """(first, end) triangle ranges of the moving objects' faces that are
         not two-level prototypes (one tree each in an instanced world)."""
-        return [(o.face_offset + lo, o.face_offset + hi) for o in self.moving
-                for lo, hi, copies in o.segments() if not copies]
+        return [(o.face_offset + seg[0], o.face_offset + seg[1]) for o in self.moving for seg in o.segments()
+                if not seg[2]]
 
     @property
     def key_bytes(self):

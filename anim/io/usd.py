@@ -20,7 +20,9 @@ import numpy as np
 
 from anim.errors import SceneError
 from anim.io.polygons import split_at_seams, triangulate
+from anim.instances import two_level
 from anim.io.usd_instancer import PointInstancer, check_cycles
+from anim.io.usd_proxies import ProxyInstances, instance_root, proxy_groups
 from anim.materials import DEFAULT_MATERIAL, pbr_material
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -453,8 +455,14 @@ class UsdObject:
         def meshes_under(proto_root):
             return mesh_prims(self.stage, proto_root, scene_path, key)
 
+        proxies = self._proxies(prims, skinned, mesh_of, instancing)
+        grouped = {} if proxies is None else {str(p.GetPath()): None for p in proxies.proxies}
         self.meshes = [PointInstancer(p, pxr, meshes_under, mesh_of, scene_path, key, instancing)
-                       if p.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(p) for p in prims]
+                       if p.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(p)
+                       for p in prims if str(p.GetPath()) not in grouped]
+        flat_at = self._flattened_places(prims, proxies)
+        if proxies is not None:
+            self.meshes.append(proxies)
         self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
         # a point instancer's meshes are its blocks' prototype meshes
@@ -469,8 +477,9 @@ class UsdObject:
                                    for m in self.meshes]).astype(np.float32)
         # materials: a slot per distinct material, per triangle
         self.materials, slots, face_material = {}, {}, []
-        # two-level point instancers: segments (first face, end, copies; 0: not a prototype) in
-        # the flattened order, each block's copies' material slots (or None), the faces those replace
+        # two-level point instancers and instance proxies: segments (first face, end, copies, where
+        # the flattened world numbers them: 0 copies, placed as they are), each block's copies'
+        # material slots (or None), the faces those replace
         self.segments, self.instance_slots, self.block_static, plain, face0 = [], [], [], [], 0
         for m in self.meshes:
             per_tri, found = m.materials
@@ -480,21 +489,64 @@ class UsdObject:
                 self.materials[local[j]] = mat
             face_material.append(local[per_tri])
             if getattr(m, "two_level", False):
-                for (lo, hi), (proto, _, ids, _), copy_slots in zip(m.block_faces, m.blocks, m.block_slots):
-                    self.segments.append((face0 + lo, face0 + hi, len(ids)))
+                for (lo, hi), (proto, _, ids, _), copy_slots, at in zip(m.block_faces, m.blocks, m.block_slots,
+                                                                          flat_at[id(m)]):
+                    self.segments.append((face0 + lo, face0 + hi, len(ids), at))
                     self.instance_slots.append(None if copy_slots is None else local[copy_slots])
                     self.block_static.append(proto.static)
                 plain.append(m.plain)
             else:
-                self.segments.append((face0, face0 + len(m.faces), 0))
+                self.segments.append((face0, face0 + len(m.faces), 0, flat_at[id(m)]))
                 plain.append(np.zeros(len(m.faces), bool))
             face0 += len(m.faces)
         self.face_material = np.concatenate(face_material)
         self.plain = np.concatenate(plain)
-        self.two_level = any(copies for _, _, copies in self.segments)
+        self.two_level = any(seg[2] for seg in self.segments)
         self.static = all(m.static for m in self.meshes)
         self.rigid = all(m.rigid for m in self.meshes)     # moved by transforms only
         self.rest = self._evaluate(0.0, every=True)
+
+    def _proxies(self, prims, skinned, mesh_of, instancing):
+        """The instance proxies among prims as one two-level ProxyInstances
+        (anim/io/usd_proxies.py) when render.instancing chooses it for their
+        copied triangles, else None."""
+        if instancing == "flatten":
+            return None
+        groups = proxy_groups(prims, self.pxr, skinned)
+        if not groups:
+            return None
+        proxies = ProxyInstances(list(groups.values()), mesh_of, self.pxr, self.scene_path, self.key)
+        copied = sum(len(roots) * (hi - lo) for roots, (lo, hi) in zip(proxies.roots, proxies.block_faces))
+        return proxies if two_level(instancing, copied, len(proxies.proxies)) else None
+
+    def _flattened_places(self, prims, proxies):
+        """{id(mesh): where the flattened world numbers its triangles}: a
+        mesh's first triangle ([start]), a two-level point instancer's
+        blocks' copies' (a list of arrays, block by block, as it lays them
+        out), the instance proxies' copies' (in the stage's order)."""
+        copy_of = {} if proxies is None else {str(prim.GetPath()): (b, c) for b, group in enumerate(proxies.groups)
+                                              for c, prim in enumerate(group)}
+        by_path = {m.path: m for m in self.meshes}
+        out = {} if proxies is None else {id(proxies): [np.empty(len(r), np.int64) for r in proxies.roots]}
+        start = 0
+        for prim in prims:
+            path = str(prim.GetPath())
+            if path in copy_of:
+                b, c = copy_of[path]
+                out[id(proxies)][b][c] = start
+                lo, hi = proxies.block_faces[b]
+                start += hi - lo
+                continue
+            m = by_path[path]
+            if getattr(m, "two_level", False):
+                out[id(m)] = []
+                for (lo, hi), (_, _, ids, _) in zip(m.block_faces, m.blocks):
+                    out[id(m)].append(start + np.arange(len(ids), dtype=np.int64) * (hi - lo))
+                    start += len(ids) * (hi - lo)
+            else:
+                out[id(m)] = np.array([start], np.int64)
+                start += len(m.faces)
+        return out
 
     def time_range(self):
         """(t0, t1) in seconds of the stage's authored time code range, or None."""
@@ -539,7 +591,7 @@ class UsdObject:
         time = self.time_code(t)
         cache = self.pxr.UsdGeom.XformCache(time)
         out = [b for m in self.meshes if getattr(m, "two_level", False)
-               for b in m.instance_matrices(self.pxr, time, cache)]
+               for b in m.instance_matrices(self.pxr, time, cache)]    # in self.segments' order
         if transform is not None:
             top = np.asarray(transform, np.float64)
             for b in out:
@@ -650,12 +702,32 @@ def _lens_and_shutter(prim, time, pxr, notes) -> tuple:
     return lens, blur
 
 
-def scene_of_stage(path, camera=None):
+def _instances_subtree(stage, prims, skel_cache, pxr, instancing):
+    """The path of the nearest prim holding every instance whose proxies
+    are traced two-level, or None (none are: flattened)."""
+    if instancing == "flatten":
+        return None
+    groups = proxy_groups(prims, pxr, _skinning_targets(stage, skel_cache, pxr))
+    copied = sum(len(g) * sum(max(c - 2, 0) for c in (pxr.UsdGeom.Mesh(g[0]).GetFaceVertexCountsAttr().Get() or []))
+                 for g in groups.values())
+    if not groups or not two_level(instancing, copied, sum(len(g) for g in groups.values())):
+        return None
+    roots = [instance_root(p).GetPath() for g in groups.values() for p in g]
+    common = roots[0]
+    for r in roots[1:]:
+        common = common.GetCommonPrefix(r)
+    return common
+
+
+def scene_of_stage(path, camera=None, instancing="auto"):
     """A scene file's data (anim/schema.py) for a whole USD stage, and notes
-    on what came from the stage and what from frustrace's defaults."""
+    on what came from the stage and what from frustrace's defaults.
+    Every mesh is an object of its own, but where instance proxies are
+    traced two-level (render.instancing) the subtree that holds their
+    instances is one object, so that they can share their prototypes."""
     path = Path(path)
     pxr = _pxr(path, "")
-    stage, _ = open_stage(path, path, "")
+    stage, skel_cache = open_stage(path, path, "")
     notes = [f"USD stage: upAxis {pxr.UsdGeom.GetStageUpAxis(stage)}, metersPerUnit "
              f"{pxr.UsdGeom.GetStageMetersPerUnit(stage):g} (as authored: no conversion)"]
     fps = stage.GetFramesPerSecond() or 24.0
@@ -671,7 +743,14 @@ def scene_of_stage(path, camera=None):
     prims = mesh_prims(stage, stage.GetPseudoRoot(), path, "")
     if not prims:
         raise SceneError(path, "", "no mesh in the stage")
-    objects = [{"name": str(p.GetPath()), "mesh": path.name, "prim": str(p.GetPath())} for p in prims]
+    shared = _instances_subtree(stage, prims, skel_cache, pxr, instancing)
+    objects = []
+    for p in prims:
+        where = shared if shared is not None and p.GetPath().HasPrefix(shared) else p.GetPath()
+        if not objects or objects[-1]["prim"] != str(where):
+            objects.append({"name": str(where), "mesh": path.name, "prim": str(where)})
+    if shared is not None:
+        notes.append(f"instance proxies under {shared} traced two-level (render.instancing)")
     time0 = pxr.Usd.TimeCode(start / fps * tcps)
     cam_prim = _camera_prim(stage, camera, pxr, path)
     width = 512

@@ -14,7 +14,7 @@ from cli.main import main
 from raycore.images.image_io import read_exr
 
 pytest.importorskip("pxr")
-from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt  # noqa: E402
 
 from tests.usd_files import mesh, new_stage, tube  # noqa: E402
 
@@ -316,3 +316,60 @@ def test_two_level_copies_take_their_display_colours(tmp_path):
     assert np.mean(np.any(flat > 0.01, axis=-1)) > 0.05
     assert np.mean(np.abs(flat - two).max(axis=-1) < 2e-3) >= 0.995
     assert len(np.unique(np.round(two.reshape(-1, 3), 2), axis=0)) > N
+
+
+def test_instanceable_prims_two_level_match_their_flattened_frames(tmp_path):
+    """Instanceable references (instance proxies) traced two-level: each
+    prototype mesh read once, every instance root placing a copy (one of
+    them moving, one with a material of its own bound above its
+    prototype), against the same stage flattened: depth, ids (the
+    flattened numbering, with a plain mesh between the instances) and colours."""
+    path = tmp_path / "inst.usda"
+    stage = new_stage(path)
+    _camera(stage)
+    _prototypes(stage, "/Proto")
+    stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
+    red = UsdShade.Material.Define(stage, "/Looks/Red")
+    shader = UsdShade.Shader.Define(stage, "/Looks/Red/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.9, 0.1, 0.1))
+    red.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    rng = np.random.default_rng(6)
+    for k in range(6):
+        copy = UsdGeom.Xform.Define(stage, f"/World/C{k}")
+        op = copy.AddTranslateOp()
+        op.Set(Gf.Vec3d(*rng.uniform(-5, 5, 3) * [1, 0.6, 0.2]), 0)
+        if k == 2:
+            op.Set(Gf.Vec3d(0, -2, 0), 10)
+        copy.AddRotateZOp().Set(float(rng.uniform(0, 360)))
+        copy.GetPrim().GetReferences().AddInternalReference("/Proto")
+        copy.GetPrim().SetInstanceable(True)
+        if k == 4:
+            UsdShade.MaterialBindingAPI.Apply(copy.GetPrim()).Bind(red)
+        if k == 3:
+            UsdGeom.Cube.Define(stage, "/World/Between")       # not a mesh: left out
+            ground = UsdGeom.Mesh.Define(stage, "/World/Plain")
+            ground.CreatePointsAttr([(-9, -4, -3), (9, -4, -3), (9, 4, -3), (-9, 4, -3)])
+            ground.CreateFaceVertexCountsAttr([4])
+            ground.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    stage.GetRootLayer().Save()
+    from anim.scene import AnimatedScene
+    scene = AnimatedScene(path, instancing="two_level")
+    # the red copy is a group of its own, of one: flattened
+    assert len(scene.instance_proto) == 5 * 2 and len(scene.proto_ranges) == 2
+    frames = []
+    for instancing in ("flatten", "two_level"):
+        out = tmp_path / instancing
+        res = CliRunner().invoke(main, ["render", str(path), "-o", str(out), "-q", "--res", "96x96", "--frames",
+                                        "0:10", "--instancing", instancing, "--aov", "id"])
+        assert res.exit_code == 0, res.output
+        got = []
+        for f in sorted(out.glob("*.exr")):
+            names, pix, _ = read_exr(str(f))
+            got.append((pix[..., names.index("Z")], pix[..., [names.index(c) for c in "RGB"]],
+                        pix[..., names.index("id")]))
+        frames.append(got)
+    for (za, ca, ia), (zb, cb, ib) in zip(*frames):
+        _same(za[None], zb[None], hits=0.02)
+        assert np.mean(ia == ib) >= 0.999
+        assert np.mean(np.abs(ca - cb).max(axis=-1) < 2e-3) >= 0.995
