@@ -46,6 +46,31 @@ def quaternion_matrices(q):
                      np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
 
 
+class LinearKeys:
+    """Keyed values (k, ...) interpolated linearly, as a linear Curve (the
+    keys exact, clamped or looped) without its per-segment coefficients:
+    four times the keys' memory, which a table of many copies feels."""
+
+    def __init__(self, times, values, extrapolate):
+        self.times, self.values, self.extrapolate = times, np.asarray(values, np.float64), extrapolate
+        self.constant = len(times) == 1 or bool(np.all(self.values == self.values[0]))
+
+    def __call__(self, t):
+        if len(self.times) == 1:
+            return self.values[0]
+        t, k = locate(self.times, t, self.extrapolate)
+        if t >= self.times[-1]:
+            return self.values[-1]
+        u = (t - self.times[k]) / (self.times[k + 1] - self.times[k])
+        return self.values[k] + u * (self.values[k + 1] - self.values[k])
+
+
+def keyed(times, values, method, extrapolate):
+    """An instance table's translation or scale keys: LinearKeys for linear
+    interpolation, else a Curve of the method."""
+    return LinearKeys(times, values, extrapolate) if method == "linear" else Curve(times, values, method, extrapolate)
+
+
 class InstanceTable:
     """n copies' TRS keys; `matrices(t)` gives their (n, 3, 4) transforms."""
 
@@ -63,6 +88,7 @@ class InstanceTable:
         rot = arrays.get("rotation")
         rot = np.broadcast_to([1.0, 0.0, 0.0, 0.0], (k, n, 4)) if rot is None else rot
         scale = arrays.get("scale")
+        given_scale = scale is not None
         scale = np.ones((k, n, 3)) if scale is None else scale
         if scale.ndim == 2 and scale.shape == (k, n):
             scale = np.repeat(scale[:, :, None], 3, axis=2)
@@ -86,9 +112,10 @@ class InstanceTable:
         self.n, self.times, self.extrapolate = n, times, extrapolate
         self.quats = rot / norms[:, :, None]
         self.visible = np.asarray(visible, bool)
-        self.translation = Curve(times, tr, spec.interpolation, extrapolate)
-        self.scale = Curve(times, scale, spec.interpolation, extrapolate)
-        self.constant = (self.translation.constant and self.scale.constant and
+        self.translation = keyed(times, tr, spec.interpolation, extrapolate)
+        # no scale given: none kept (a million copies' ones and their curve cost ~150 MB)
+        self.scale = keyed(times, scale, spec.interpolation, extrapolate) if given_scale else None
+        self.constant = (self.translation.constant and (self.scale is None or self.scale.constant) and
                          bool(np.all(self.visible == self.visible[0])) and
                          bool(np.all(np.abs(np.sum(self.quats * self.quats[:1], axis=2)) > 1 - 1e-15)))
 
@@ -144,7 +171,7 @@ class InstanceTable:
     def matrices(self, t):
         """(n, 3, 4) float64: copy i's T + R (S * v); a hidden copy's collapses to its position."""
         tr = self.translation(t)
-        scale = self.scale(t)
+        scale = np.ones((self.n, 3)) if self.scale is None else self.scale(t)
         if len(self.times) == 1:
             q0 = q1 = self.quats[0]
             u, vis = 0.0, self.visible[0]

@@ -617,7 +617,8 @@ class AnimatedScene:
         if not self.two_level:
             return None
         from raycore.instancing.world import InstanceFrame
-        matrices = np.concatenate([m for o in self.two_level for m in o.instance_matrices(t)])
+        blocks = [m for o in self.two_level for m in o.instance_matrices(t)]
+        matrices = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
         return InstanceFrame(self.proto_ranges, self.proto_moving, self.instance_proto, matrices,
                              self.instance_material, self.id_base, self.tri_shift, self.plain)
 
