@@ -260,7 +260,7 @@ class GltfObject:
                 inst = {"node": node_index, "offset": 0, "rest": np.ascontiguousarray(pos), "copies": copies,
                         "targets": [self.accessor(t["POSITION"]).astype(np.float32)
                                     for t in (prim.targets or []) if t.get("POSITION") is not None],
-                        "mesh": node.mesh, "skin": None}
+                        "mesh": node.mesh, "primitive": p_index, "skin": None}
                 weights = getattr(node, "weights", None)       # pygltflib drops node.weights
                 weights = weights if weights is not None else mesh.weights
                 inst["morph_weights"] = np.asarray(weights if weights is not None else
@@ -280,18 +280,36 @@ class GltfObject:
                 if copies is not None and inst["skin"] is not None:
                     self._fail(f"node {node_index}: a skinned mesh with EXT_mesh_gpu_instancing is not supported")
                 pending.append((inst, pos, idx, uv, prim.material))
-        # two-level: each instanced primitive once (its copies placed by instance_matrices)
-        copied = sum(len(inst["copies"]) * (len(idx) // 3) for inst, _, idx, _, _ in pending
-                     if inst["copies"] is not None)
-        n_copies = sum(len(inst["copies"]) for inst, *_ in pending if inst["copies"] is not None)
+        # two-level: each GPU-instanced primitive once, and each primitive that
+        # several nodes show (no skin, no morph targets) once; instance_matrices places the copies
+        tris = [len(idx) // 3 for _, _, idx, _, _ in pending]
+        sharing = {}
+        for j, (inst, *_) in enumerate(pending):
+            if inst["copies"] is None and inst["skin"] is None and not inst["targets"]:
+                sharing.setdefault((inst["mesh"], inst["primitive"]), []).append(j)
+        sharing = {k: v for k, v in sharing.items() if len(v) > 1}
+        gpu = [j for j, (inst, *_) in enumerate(pending) if inst["copies"] is not None]
+        copied = (sum(len(pending[j][0]["copies"]) * tris[j] for j in gpu)
+                  + sum(len(v) * tris[v[0]] for v in sharing.values()))
+        n_copies = sum(len(pending[j][0]["copies"]) for j in gpu) + sum(len(v) for v in sharing.values())
         self.two_level = copied > 0 and two_level(self.instancing, copied, n_copies)
+        # where the flattened file numbers each entry's triangles
+        flat_at, at = [], 0
+        for j, (inst, *_) in enumerate(pending):
+            flat_at.append(at)
+            at += tris[j] * (1 if inst["copies"] is None else len(inst["copies"]))
+        first_of = {v[0]: v for v in sharing.values()} if self.two_level else {}
+        shown_by = {j for v in first_of.values() for j in v[1:]}
         self.segments, face0 = [], 0
-        for inst, pos, idx, uv, material in pending:
+        for j, (inst, pos, idx, uv, material) in enumerate(pending):
             copies = inst["copies"]
             if copies is not None and not self.two_level:
-                check_copies(len(copies) * (len(idx) // 3), f"node {inst['node']}: {len(copies):,} "
+                check_copies(len(copies) * tris[j], f"node {inst['node']}: {len(copies):,} "
                              "EXT_mesh_gpu_instancing copies", self.scene_path, self.key)
-            inst["two_level"] = copies is not None and self.two_level
+            inst["two_level"] = self.two_level and (copies is not None or j in first_of)
+            inst["nodes"] = [pending[m][0]["node"] for m in first_of[j]] if j in first_of else None
+            if j in shown_by:                    # a copy of an earlier entry's primitive: no triangles of its own
+                continue
             n = 1 if copies is None or inst["two_level"] else len(copies)
             inst["offset"] = offset
             self.instances.append(inst)
@@ -301,7 +319,14 @@ class GltfObject:
             face_material.append(np.full(n * len(tri), -1 if material is None else material, np.int32))
             uvs.append(np.tile(uv, (n, 1)))
             offset += n * len(pos)
-            self.segments.append((face0, face0 + n * len(tri), len(copies) if inst["two_level"] else 0))
+            if not inst["two_level"]:
+                self.segments.append((face0, face0 + n * len(tri), 0, np.array([flat_at[j]], np.int64)))
+            elif copies is not None:
+                self.segments.append((face0, face0 + len(tri), len(copies),
+                                      flat_at[j] + np.arange(len(copies), dtype=np.int64) * len(tri)))
+            else:
+                self.segments.append((face0, face0 + len(tri), len(first_of[j]),
+                                      np.array([flat_at[m] for m in first_of[j]], np.int64)))
             face0 += n * len(tri)
         blocks = [inst for inst in self.instances if inst["two_level"]]
         self.block_static = [not inst["targets"] for inst in blocks]     # morph targets may move a prototype
@@ -564,13 +589,15 @@ class GltfObject:
 
     def instance_matrices(self, t, transform=None):
         """Two-level: per instanced primitive, its copies' (n, 3, 4) matrices
-        at time t (the node's world transform after each copy's own, and
-        `transform` on top)."""
+        at time t (the node's world transform after each GPU copy's own, or
+        each node's that shows a shared primitive, and `transform` on top)."""
         world, _ = self._pose(t)
         top = np.eye(4)
         if transform is not None:
             top[:3] = transform
-        return [(top @ world[inst["node"]] @ inst["copies"])[:, :3] for inst in self.instances if inst["two_level"]]
+        return [(top @ world[inst["node"]] @ inst["copies"])[:, :3] if inst["copies"] is not None
+                else np.stack([(top @ world[node])[:3] for node in inst["nodes"]])
+                for inst in self.instances if inst["two_level"]]
 
     def place(self, t, out, transform=None):
         """Posed vertices at time t into out (n, 3) f32; `transform` (3, 4) on top

@@ -369,3 +369,39 @@ def test_gltf_gpu_instancing_two_level_places_the_copies_the_flattened_frame_has
         np.testing.assert_allclose(m[:, :, 3], tr + [0, 0, 2 * t], atol=1e-6)
     times = [0.0, 0.5]
     _agree(_frames(path, "flatten", times, aovs=("id",), accel="bvh"), _frames(path, "two_level", times, aovs=("id",)))
+
+
+def test_gltf_nodes_sharing_a_mesh_two_level_are_the_flattened_frames(tmp_path):
+    """Nodes that show one mesh, traced two-level: the mesh once, a copy
+    per node placed by the node's world transform (one node animated,
+    others under a parent, a single-use mesh between them), against the
+    copies made into triangles: depth, ids (each node's place in the
+    flattened numbering) and colours."""
+    from anim.scene import AnimatedScene
+    from conftest import icosphere_mesh
+    from tests.gltf_files import GltfBuilder
+    from scipy.spatial.transform import Rotation
+    rng = np.random.default_rng(8)
+    v, f = icosphere_mesh(2, 0.5)
+    b = GltfBuilder()
+    ball = b.mesh(np.asarray(v, np.float32), np.asarray(f, np.uint32).reshape(-1))
+    tri = b.mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), np.array([0, 1, 2], np.uint32))
+    nodes = []
+    for k in range(12):
+        q = Rotation.random(random_state=k).as_quat()
+        nodes.append(b.node(mesh=ball, translation=list(rng.uniform(-3, 3, 3) * [1, 0.6, 0.3]),
+                            rotation=list(q), scale=list(rng.uniform(0.5, 1.2, 3))))
+        if k == 5:
+            nodes.append(b.node(mesh=tri, translation=[0.0, -1.0, 0.5]))
+    parent = b.node(children=nodes[6:], translation=[0.5, 0.2, 0.0])
+    b.animation([(nodes[1], "translation", np.array([0.0, 1.0]), np.array([[0, 0, 0], [0, 1.5, 0.0]]), "LINEAR")])
+    b.save(tmp_path / "balls.glb", nodes[:6] + [parent])
+    (tmp_path / "ground.obj").write_text("v -9 -2 -9\nv 9 -2 -9\nv 9 -2 9\nv -9 -2 9\nf 1 3 2\nf 1 4 3\n")
+    path = tmp_path / "g.yaml"
+    path.write_text(HEAD.replace("[48, 48]", "[96, 80]") + "  - name: balls\n    mesh: balls.glb\n"
+                    "  - name: ground\n    mesh: ground.obj\n")
+    scene = AnimatedScene(path, instancing="two_level")
+    assert len(scene.instance_proto) == 12 and len(scene.proto_ranges) == 1
+    assert len(scene.faces) == len(f) + 1 + 2 and scene.flat_triangles == 12 * len(f) + 1 + 2
+    times = [0.0, 0.5]
+    _agree(_frames(path, "flatten", times, aovs=("id",), accel="bvh"), _frames(path, "two_level", times, aovs=("id",)))
