@@ -214,6 +214,8 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run
     cancels every chunk still out."""
     import dataclasses
 
+    from concurrent.futures import CancelledError
+
     from distributed import as_completed
 
     from anim.render.cluster import TASK_RETRIES, bundle_scene, chunks_of, render_chunk
@@ -222,19 +224,39 @@ def _render_on_cluster(job, todo, take, done, on_frame, should_stop, client, run
     paths = dict(mine)
     if not mine:
         return {"workers": {}}
-    bundle = client.scatter(bundle_scene(scene), broadcast=True, hash=False)
+    data = bundle_scene(scene)
+    bundle = client.scatter(data, broadcast=True, hash=False)
     cfg_fields = dataclasses.asdict(cfg)
-    futures = [client.submit(render_chunk, bundle, cfg_fields, c, scene.spec.output.compression, VERSION, run_info,
-                             retries=TASK_RETRIES, pure=False)
-               for c in chunks_of([f for f, _ in mine], max(1, job.chunk))]
+
+    def submit(chunk):
+        return client.submit(render_chunk, bundle, cfg_fields, chunk, scene.spec.output.compression, VERSION,
+                             run_info, retries=TASK_RETRIES, pure=False)
+    chunk_of = {}
+    for c in chunks_of([f for f, _ in mine], max(1, job.chunk)):
+        chunk_of[submit(c)] = (c, 0)
+    futures = list(chunk_of)
     workers = {}
     try:
-        for future in as_completed(futures):
+        pending = as_completed(futures)
+        for future in pending:
             stop = should_stop() if should_stop else None
             if stop is not None:
                 raise stop
             try:
                 results = future.result()
+            except CancelledError:
+                # the scene's bundle was lost with the workers that held it (one that joined after
+                # the scatter may have had none): sent again, and the chunk with it
+                chunk, tries = chunk_of[future]
+                if tries >= TASK_RETRIES:
+                    raise FrameRenderError(f"frames {chunk[0]}..{chunk[-1]}: cancelled by the cluster "
+                                           f"{tries + 1} times (workers lost)") from None
+                bundle = client.scatter(data, broadcast=True, hash=False)
+                again = submit(chunk)
+                chunk_of[again] = (chunk, tries + 1)
+                futures.append(again)
+                pending.add(again)
+                continue
             except Exception as exc:     # the task's error, raised again here by Dask
                 raise FrameRenderError(str(exc)) from None
             for frame, data, row in results:
