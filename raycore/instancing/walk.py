@@ -29,17 +29,21 @@ from raycore.jit.tile_queue import new_queue, next_tile
 
 
 @helper
-def _to_instance(ray, lray, idx, n, inverse, j):
-    """Rays idx[0..n) of `ray` into instance j's space (inverse[j]: object
-    from world, a 3x4's rows), packed as rays 0..n-1 of `lray`."""
+def _to_instance(ray, lray, idx, n, inverse, place_t, j):
+    """Rays idx[0..n) of `ray` into instance j's space (a point p going to
+    L^-1 (p - T): inverse[j]'s rows hold L^-1, place_t[j] T in float64),
+    packed as rays 0..n-1 of `lray`."""
     m = inverse[j]
+    tx, ty, tz = place_t[j, 0], place_t[j, 1], place_t[j, 2]
     for q in range(n):
         r = idx[q]
-        ox, oy, oz = ray[OX, r], ray[OY, r], ray[OZ, r]
+        ox = np.float32(np.float64(ray[OX, r]) - tx)
+        oy = np.float32(np.float64(ray[OY, r]) - ty)
+        oz = np.float32(np.float64(ray[OZ, r]) - tz)
         dx, dy, dz = ray[DX, r], ray[DY, r], ray[DZ, r]
-        lray[OX, q] = m[0] * ox + m[1] * oy + m[2] * oz + m[3]
-        lray[OY, q] = m[4] * ox + m[5] * oy + m[6] * oz + m[7]
-        lray[OZ, q] = m[8] * ox + m[9] * oy + m[10] * oz + m[11]
+        lray[OX, q] = m[0] * ox + m[1] * oy + m[2] * oz
+        lray[OY, q] = m[4] * ox + m[5] * oy + m[6] * oz
+        lray[OZ, q] = m[8] * ox + m[9] * oy + m[10] * oz
         lray[DX, q] = m[0] * dx + m[1] * dy + m[2] * dz
         lray[DY, q] = m[4] * dx + m[5] * dy + m[6] * dz
         lray[DZ, q] = m[8] * dx + m[9] * dy + m[10] * dz
@@ -78,7 +82,7 @@ def _in_instance(trees, tree_root, lray, h_t, h_b1, h_b2, lprim, n, any_hit, vis
 
 
 @helper
-def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only, mode,
+def walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only, mode,
                local, ia, planes, stack, top_stack, counters, row):
     """Closest (or any) hits of packet rays 0..n-1 in an instanced world:
     on entry h_t holds each ray's t_max (-inf: no ray), prim -1; on return
@@ -144,7 +148,7 @@ def walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst
         first = node_i[i, CHILD]
         for k in range(first, first + c):
             j = top_inst[k]
-            _to_instance(ray, lray, idx, m, inverse, j)
+            _to_instance(ray, lray, idx, m, inverse, place_t, j)
             for q in range(m):
                 lt[q] = h_t[idx[q]]
                 lb1[q] = h_b1[idx[q]]
@@ -178,7 +182,7 @@ def world_scratch():
 
 
 @kernel
-def world_camera(top, trees, place_tree, inverse, cam, width, height, jx, jy, queue, out_t, out_prim, out_inst,
+def world_camera(top, trees, place_tree, inverse, place_t, cam, width, height, jx, jy, queue, out_t, out_prim, out_inst,
                  out_b1, out_b2, counters):
     """Closest hits of the camera rays (offset jx, jy), row-major, in
     8x8-pixel packets sharing the eye (bvh/trace.trace_camera_bvh's tiles)."""
@@ -193,7 +197,7 @@ def world_camera(top, trees, place_tree, inverse, cam, width, height, jx, jy, qu
         x0 = (p % tiles_x) * side
         y0 = (p // tiles_x) * side
         n = load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx, jy, side)
-        walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, False, False,
+        walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, False, False,
                    SHARED_ORIGIN, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
         q = 0
@@ -213,7 +217,7 @@ def world_camera(top, trees, place_tree, inverse, cam, width, height, jx, jy, qu
 
 
 @kernel
-def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direction, t_min, t_max, any_hit, mode,
+def world_batch(top, trees, place_tree, inverse, place_t, order, n_active, origin, direction, t_min, t_max, any_hit, mode,
                 queue, out_t, out_prim, out_inst, out_b1, out_b2, vis, counters):
     """Rays order[0..n_active) (origin, direction: (3, n) SoA) in packets
     of PACKET consecutive entries, as bvh/trace.trace_batch: hits (when
@@ -232,7 +236,7 @@ def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direct
         n = min(PACKET, n_active - base)
         load_batch_packet(ray, h_t, h_b1, h_b2, prim, order, base, n, origin, direction, t_min, t_max,
                           mode == SHARED_ORIGIN)
-        walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only,
+        walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, any_hit, vis_only,
                    mode, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
         store_batch_packet(h_t, h_b1, h_b2, prim, order, base, n, want_hits, want_vis, out_t, out_prim, out_b1,
@@ -243,7 +247,7 @@ def world_batch(top, trees, place_tree, inverse, order, n_active, origin, direct
 
 
 @kernel
-def world_light_samples(top, trees, place_tree, inverse, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps,
+def world_light_samples(top, trees, place_tree, inverse, place_t, lights, rows, lifted, geo_n, smooth_n, mag, offset_ulps,
                         skip, queue, vis, counters):
     """bvh/trace.trace_light_samples in an instanced world: every light's
     shadow rays from the samples of the packets this thread pulls, into
@@ -265,7 +269,7 @@ def world_light_samples(top, trees, place_tree, inverse, lights, rows, lifted, g
             live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
                                      geo_n, smooth_n, mag, offset_ulps, skip)
             mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
-            walk_world(top, trees, place_tree, inverse, ray, h_t, h_b1, h_b2, prim, inst, n, True, True, mode,
+            walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, True, True, mode,
                        local, ia, planes, stack, top_stack, counters, p)
             counters[p, PACKETS] += 1
             out = rows[j]
@@ -291,7 +295,7 @@ NO_SKIP = np.zeros(0, np.bool_)
 
 def world_trace_camera(world, cam, width, height, jitter, out):
     """Row-major (t, prim, inst, b1, b2) of one camera ray per pixel into
-    out, and the counters. world: (top, trees, place_tree, inverse)."""
+    out, and the counters. world: (top, trees, place_tree, inverse, place_t)."""
     counters = np.zeros((-(-width // 8) * -(-height // 8), N_COUNTERS), np.int64)
     on_threads(world_camera, _workers(), *world, cam, width, height, np.float32(jitter[0]), np.float32(jitter[1]),
                new_queue(), *out, counters)

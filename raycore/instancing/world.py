@@ -47,11 +47,12 @@ class InstanceFrame(NamedTuple):
 class Placement(NamedTuple):
     """Every instance the traversal sees (the world's trees under the identity first)."""
     tree: np.ndarray         # (M,) int64: root node of the instance's tree
-    inverse: np.ndarray      # (M, 12) f32: object from world, rows of a 3x4
+    inverse: np.ndarray      # (M, 12) f32: object from world as rows [L^-1 | T]: p -> L^-1 (p - T)
     forward: np.ndarray      # (M, 12) f32: world from object
     identity: np.ndarray     # (M,) bool
     material: np.ndarray     # (M,) int32
     id_base: np.ndarray      # (M,) int64
+    origin: np.ndarray       # (M, 3) float64: T, the instance's translation (rays map by L^-1 (p - T))
 
 
 @parallel_kernel
@@ -83,12 +84,17 @@ def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
 
 
 @parallel_kernel
-def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forward, shown):
+def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forward, origin, shown):
     """Per instance j (matrices[j]: world from object, a 3x4's rows, float64):
     its tree's root, its inverse and itself as float32 rows, and whether it
     is shown: a prototype with a tree, an invertible matrix, an inverse
     finite in float32 (a copy scaled to nothing is hidden, as a hidden
-    copy's zero matrix is)."""
+    copy's zero matrix is). The inverse's rows are the inverse 3x3 and the
+    translation T (float32), and origin[j] is T in float64: a point maps to
+    L^-1 (p - T), its subtraction in float64, so that the copy is where its
+    matrix puts it however far from the world's origin (a 3x4 inverse's
+    -L^-1 T cancels against L^-1 p and loses the digits of both: depth 0.4 %
+    out 10^5 units away, where flattened copies are 0.01 % out)."""
     for j in numba.prange(proto.shape[0]):
         m = matrices[j]
         a, b, c = m[0], m[1], m[2]
@@ -103,12 +109,13 @@ def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forwar
         r = 1.0 / det if ok else 0.0
         lin = (c00 * r, c01 * r, c02 * r, c10 * r, c11 * r, c12 * r, c20 * r, c21 * r, c22 * r)
         tx, ty, tz = m[3], m[7], m[11]
+        shift = (tx, ty, tz)
+        origin[j, 0], origin[j, 1], origin[j, 2] = tx, ty, tz
         for row in range(3):
-            p, q, s = lin[3 * row], lin[3 * row + 1], lin[3 * row + 2]
-            inverse[j, 4 * row] = p
-            inverse[j, 4 * row + 1] = q
-            inverse[j, 4 * row + 2] = s
-            inverse[j, 4 * row + 3] = -(p * tx + q * ty + s * tz)
+            inverse[j, 4 * row] = lin[3 * row]
+            inverse[j, 4 * row + 1] = lin[3 * row + 1]
+            inverse[j, 4 * row + 2] = lin[3 * row + 2]
+            inverse[j, 4 * row + 3] = shift[row]
         for q in range(12):
             forward[j, q] = m[q]
             ok = ok and np.isfinite(inverse[j, q])
@@ -168,22 +175,24 @@ class InstancedStructures:
         tree = np.empty(k + n, np.int64)
         inverse = np.empty((k + n, 12), np.float32)
         forward = np.empty((k + n, 12), np.float32)
+        origin = np.zeros((k + n, 3), np.float64)
         tree[:k] = self.trees.node_lo[self.world_trees]
         inverse[:k] = forward[:k] = np.eye(3, 4, dtype=np.float32).reshape(12)
         shown = np.empty(n, np.bool_)
         invert_instances(frame.matrices.reshape(n, 12), frame.proto, self.proto_tree, self.trees.node_lo,
-                         tree[k:], inverse[k:], forward[k:], shown)
+                         tree[k:], inverse[k:], forward[k:], origin[k:], shown)
         ids = np.nonzero(shown)[0]
         m = k + len(ids)
         if len(ids) < n:                   # the hidden copies left out
             tree[k:m], inverse[k:m], forward[k:m] = tree[k:][ids], inverse[k:][ids], forward[k:][ids]
+            origin[k:m] = origin[k:][ids]
         material = np.empty(m, np.int32)
         material[:k], material[k:] = -1, frame.material[ids]
         id_base = np.zeros(m, np.int64)
         id_base[k:] = frame.id_base[ids]
         identity = np.zeros(m, np.bool_)
         identity[:k] = True
-        return Placement(tree[:m], inverse[:m], forward[:m], identity, material, id_base)
+        return Placement(tree[:m], inverse[:m], forward[:m], identity, material, id_base, origin[:m])
 
     def update(self, vertices, frame: InstanceFrame):
         """This frame's trees and top level: (tri_verts, trees' Bvh, top Bvh, Placement)."""

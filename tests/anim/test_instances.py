@@ -405,3 +405,75 @@ def test_gltf_nodes_sharing_a_mesh_two_level_are_the_flattened_frames(tmp_path):
     assert len(scene.faces) == len(f) + 1 + 2 and scene.flat_triangles == 12 * len(f) + 1 + 2
     times = [0.0, 0.5]
     _agree(_frames(path, "flatten", times, aovs=("id",), accel="bvh"), _frames(path, "two_level", times, aovs=("id",)))
+
+
+@pytest.mark.parametrize("far", [0.0, 1.0e5])
+def test_two_level_textured_copies_and_aovs_far_from_the_origin(tmp_path, far):
+    """Textured copies (the demo's checkered floor tile), traced two-level
+    and flattened, near the origin and a hundred thousand units from it:
+    the same hits, colours (UVs carried by the seen triangles), N and P;
+    the two-level depth against the copies' planes in float64 as exact
+    there as at the origin (rays enter a copy's space by L^-1 (p - T), the
+    subtraction in float64), where the flattened copies' float32 corners
+    put depth ~1e-4 out."""
+    import shutil
+    from importlib.resources import files
+    from scipy.spatial.transform import Rotation
+    from anim.render.renderer import SceneRenderer
+    from anim.render.settings import config_of, shading_of
+    from anim.scene import AnimatedScene
+    from raycore.geometry.camera import camera_basis, primary_dir
+    demo = files("anim.builtin") / "demo"
+    for name in ("floor.obj", "checker.png"):
+        shutil.copy(demo / name, tmp_path / name)
+    rng = np.random.default_rng(11)
+    n = 12
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    tr = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1.5, n), rng.uniform(-2, 0, n)] + [far, 0, 0]
+    np.savez(tmp_path / "tiles.npz", t=np.array([0.0]), translation=tr[None], rotation=q[None],
+             scale=np.full((1, n), 0.25))
+    path = tmp_path / "tiles.yaml"
+    path.write_text(f"""version: 1
+frames: {{start: 0, end: 0, fps: 24}}
+output: {{path: out/f_##.exr, resolution: [96, 80], aovs: [N, P, id]}}
+camera: {{eye: [{far}, 2, 9], look_at: [{far}, 0, 0], fov: 50}}
+lights: [{{position: [{far + 3}, 6, 4], intensity: 40}}]
+materials: {{checks: {{diffuse: [1, 1, 1], texture: checker.png}}}}
+objects:
+  - name: tiles
+    mesh: floor.obj
+    material: checks
+    instances: {{file: tiles.npz}}
+""")
+    got = {}
+    for instancing in ("flatten", "two_level"):
+        scene = AnimatedScene(path, instancing=instancing)
+        got[instancing] = SceneRenderer(scene, config_of(scene, accel="bvh"), shading_of(scene)).render(0.0)[1]
+    a, b = got["flatten"], got["two_level"]
+    assert np.isfinite(b.z).mean() > 0.1
+    assert np.mean(a.aovs["id"] == b.aovs["id"]) >= 0.995
+    # 10^5 units out the flattened copies' float32 corners move the checks' edges (the two-level
+    # barycentrics, and so the UVs, come from the copy's own space): a few more pixels differ there
+    assert np.mean(np.abs(a.rgba - b.rgba).max(axis=2) < 2e-3) >= (0.99 if far == 0 else 0.97)
+    assert len(np.unique(np.round(b.rgba[..., 0][np.isfinite(b.z)], 2))) > 4        # checks, not one colour
+    for name in ("N.X", "N.Y", "N.Z"):          # the flattened normals, from rounded corners, as far off
+        assert np.mean(np.abs(a.aovs[name] - b.aovs[name]) < (1e-3 if far == 0 else 1e-2)) >= 0.99
+    for name in ("P.X", "P.Y", "P.Z"):
+        assert np.mean(np.isclose(a.aovs[name], b.aovs[name], rtol=1e-6, atol=0.05)) >= 0.99
+    # two-level depth against each hit copy's triangle plane in float64
+    eye, look = np.array([far, 2.0, 9.0]), np.array([far, 0.0, 0.0])
+    forward = (look - eye) / np.linalg.norm(look - eye)
+    cam = camera_basis(tuple(eye), tuple(look), (0, 1, 0), 50.0, 96, 80)
+    rot = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+    tile = np.array([[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], np.float64) * 0.25
+    corners = [[0, 2, 1], [0, 3, 2]]                       # floor.obj's two triangles
+    err = []
+    for y, x in zip(*np.nonzero(np.isfinite(b.z))):
+        copy, t = divmod(int(b.aovs["id"][y, x]), 2)
+        p = tile[corners[t]] @ rot[copy].T + tr[copy]
+        normal = np.cross(p[1] - p[0], p[2] - p[0])
+        d = np.array(primary_dir(cam, x, y, np.float32(0.5), np.float32(0.5)), np.float64)
+        z = np.dot(p[0] - eye, normal) / np.dot(d, normal) * np.dot(d, forward)
+        err.append(abs(b.z[y, x] - z) / z)
+    assert np.percentile(err, 99) < 1e-5, np.percentile(err, 99)
