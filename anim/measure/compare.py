@@ -60,8 +60,10 @@ def compare(path, names, n_frames, res, threads, label=None, shadow_accel=None, 
     'shadow_accel': ...}; the image is `res` pixels wide (None: the scene's
     resolution), the scene named `label` (default: its path). Every row's
     shadow rays go through `shadow_accel` (None: the scene's structure for
-    them, else the default)."""
-    scene = AnimatedScene(path, camera)
+    them, else the default). Instances are copied into the frame's
+    triangles (render.instancing: flatten): every row then traces its own
+    structure, where a two-level world would trace the same BVH in all."""
+    scene = AnimatedScene(path, camera, "flatten")
     frames = scene.frame_numbers[:max(1, n_frames)]
     width, height = compare_size(scene, res)
     shading = shading_of(scene)                 # textures read once, for every structure
