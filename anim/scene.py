@@ -180,7 +180,7 @@ class SceneObject:
         table = InstanceTable(spec.instances, base, scene_path, f"{key}.instances", owner, spec.extrapolate)
         copied = table.n * len(self.faces)
         if two_level(instancing, copied, table.n):
-            self.instances, self.two_level = table, True
+            self.instances, self.two_level, self.proto_faces = table, True, self.faces
             self.static = self.static and table.constant
             return
         nv = len(self.base)

@@ -634,7 +634,9 @@ def check(anim_yaml, camera, strict):
     click.echo(f"  frames {spec.frames.start}..{spec.frames.end} at {spec.frames.fps:g} fps, "
                f"{spec.output.resolution[0]}x{spec.output.resolution[1]}, spp {spec.render.spp}")
     click.echo(f"  {_count(len(scene.objects), 'object')} ({moving} moving), "
-               f"{_count(scene.faces.shape[0], 'triangle')}, {_count(scene.n_vertices, 'vertex', 'vertices')}")
+               f"{_count(scene.faces.shape[0], 'triangle')}, {_count(scene.n_vertices, 'vertex', 'vertices')}"
+               + (f"; {scene.flat_triangles:,} triangles with every copy, {len(scene.instance_proto):,} copies traced "
+                  f"two-level" if scene.two_level else ""))
     click.echo(f"  {_count(len(spec.lights), 'light')}, {_count(len(scene.materials) - 1, 'material')}, "
                f"{_count(len(scene.texture_paths), 'texture')}, "
                f"camera {'animated' if spec.camera.keys else 'static'}")
@@ -654,9 +656,15 @@ def check(anim_yaml, camera, strict):
         if o.instances is not None:
             kind = (f"{o.instances.n:,} copies of {_count(len(o.proto_faces), 'triangle')}, "
                     f"{'still' if o.static else 'moving'}")
-        copies = sum(getattr(m, "n_instances", 0) for m in (o.usd.meshes if o.usd is not None else ()))
+        meshes = o.usd.meshes if o.usd is not None else ()
+        copies = sum(getattr(m, "n_instances", 0) for m in meshes)
         if copies:
             kind += f", {copies:,} point-instanced copies"
+        proxies = sum(len(m.proxies) for m in meshes if hasattr(m, "proxies"))
+        if proxies:
+            kind += f", {proxies:,} instanceable copies sharing their prototypes' meshes"
+        if o.two_level:
+            kind += ", traced two-level"
         click.echo(f"    {o.name}: {_count(len(o.faces), 'triangle')}, {kind}")
     for note in scene.notes:
         click.echo(f"  {note}")
