@@ -22,7 +22,7 @@ import numpy as np
 from raycore.bvh.build import build_region
 from raycore.bvh.nodes import Bvh, empty_bvh
 from raycore.bvh.scene import SceneBvh
-from raycore.geometry.mesh import gather_triangles, vertex_normals
+from raycore.geometry.mesh import gather_some_triangles, gather_triangles, vertex_normals, vertex_normals_of
 from raycore.jit.presets import parallel_kernel
 
 # an instance's world box is widened by this fraction of its largest
@@ -149,6 +149,17 @@ class InstancedStructures:
         for (s, e), m in zip(frame.ranges, frame.moving):
             groups.append(np.arange(s, e, dtype=np.int32))
             moving.append(bool(m))
+        # after the first frame only the moving triangles (the world's moving objects, deforming
+        # prototypes) are gathered again and their vertices given normals again: a large static
+        # set among the copies costs nothing per frame
+        still = np.ones(n, bool)
+        for g, m in zip(groups, moving):
+            if m:
+                still[g] = False
+        self.moving_tris = np.ascontiguousarray(np.nonzero(~still)[0], np.int32)
+        self.moving_vertices = np.ascontiguousarray(np.unique(faces[self.moving_tris]), np.int32)
+        self.packed = np.empty((len(self.moving_tris), 9), np.float32)
+        self.gathered = self.normals_done = False
         # SceneBvh keeps the groups with triangles: its tree k is groups[kept[k]]
         kept = [g for g, tris in enumerate(groups) if len(tris)]
         self.trees = SceneBvh(n, groups, moving, faces)
@@ -164,7 +175,12 @@ class InstancedStructures:
         return False
 
     def normals_now(self):
-        vertex_normals(self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+        """The vertex normals of this frame: all at the first, then the moving vertices'."""
+        if self.normals_done:
+            vertex_normals_of(self.moving_vertices, self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+        else:
+            vertex_normals(self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+            self.normals_done = True
         return self.normals
 
     def placement(self, frame: InstanceFrame) -> Placement:
@@ -196,7 +212,11 @@ class InstancedStructures:
 
     def update(self, vertices, frame: InstanceFrame):
         """This frame's trees and top level: (tri_verts, trees' Bvh, top Bvh, Placement)."""
-        gather_triangles(vertices, self.faces, self.tri_verts)
+        if self.gathered:
+            gather_some_triangles(vertices, self.faces, self.moving_tris, self.tri_verts, self.packed)
+        else:
+            gather_triangles(vertices, self.faces, self.tri_verts)
+            self.gathered = True
         bvh = self.trees.update(self.tri_verts, vertices)
         self.stats = dict(self.trees.stats)
         place = self.placement(frame)

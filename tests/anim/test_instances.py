@@ -264,7 +264,8 @@ def _frames(path, instancing, times, **cfg):
 
 def _field(tmp_path):
     """A ground, a bending prototype of its own motion and copies of it that
-    move, one hidden from the second key on, under a point and a sun."""
+    move, one hidden from the second key on, and a box that moves in the
+    world (its triangles gathered again every frame), under a point and a sun."""
     tr, q, scale = _data(7)
     visible = np.ones((K, N), bool)
     visible[1:, 3] = False
@@ -277,7 +278,9 @@ def _field(tmp_path):
         "lights: [{position: [3, 6, 4], intensity: 40}]",
         "lights: [{position: [3, 6, 4], intensity: 40}, {type: directional, direction: [-0.3, -1, -0.2]}]")
         + "  - name: ground\n    mesh: ground.obj\n"
-        + "  - name: boxes\n    mesh: box.obj\n" + OWN + "    instances: {file: field.npz}\n")
+        + "  - name: boxes\n    mesh: box.obj\n" + OWN + "    instances: {file: field.npz}\n"
+        + "  - name: mover\n    mesh: box.obj\n"
+        + "    transform: {translation: {keys: [[0, -3, -1, 1], [1, 3, 1, 1]]}}\n")
     return path
 
 
@@ -333,7 +336,7 @@ def test_auto_instancing_copies_small_tables_and_traces_large_ones_two_level(tmp
     monkeypatch.setattr(instances, "TWO_LEVEL_TRIANGLES", N * 12)
     scene = AnimatedScene(path)
     assert [o.name for o in scene.two_level] == ["boxes"]
-    assert scene.faces.shape[0] == 2 + 12 and scene.flat_triangles == 2 + N * 12
+    assert scene.faces.shape[0] == 2 + 12 + 12 and scene.flat_triangles == 2 + N * 12 + 12
 
 
 def test_gltf_gpu_instancing_two_level_places_the_copies_the_flattened_frame_has(tmp_path):
