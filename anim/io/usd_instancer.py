@@ -93,10 +93,7 @@ class PointInstancer:
                 if mesh.uvs is not None:
                     uvs.append((offset, np.tile(mesh.uvs, (copies, 1))))
                 tri, mats = mesh.materials
-                local = np.arange(len(mats) + 1) + len(found)
-                local[-1] = -1
-                slots = np.tile(np.where(tri >= 0, local[tri], -1)[None], (copies, 1))
-                found += mats
+                slots = np.tile(material_slots(tri, mats, found)[None], (copies, 1))
                 plain = np.zeros(len(tri), bool)
                 slot_of_copy = None
                 if colours is not None:
@@ -116,11 +113,7 @@ class PointInstancer:
         if offset >= 2 ** 31:
             self._fail(f"{n} instances make {offset} vertices, more than 2^31")
         self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
-        self.uvs = None
-        if uvs:
-            self.uvs = np.zeros((offset, 2), np.float32)
-            for o, u in uvs:
-                self.uvs[o:o + len(u)] = u
+        self.uvs = joined_uvs(uvs, offset)
         self.materials = (np.concatenate(per_tri).astype(np.int64), found)
         self.skinning = None
         self.hides = any(pxr.UsdGeom.Imageable(p).GetVisibilityAttr().ValueMightBeTimeVarying()
@@ -270,6 +263,26 @@ def check_cycles(stage, pxr, scene_path, key):
     for path in instancers:
         if path not in state:
             visit(path, [path])
+
+
+def material_slots(tri, mats, found):
+    """A mesh's triangles' material slots (tri: into its materials mats,
+    -1 none) as slots of `found`, to which mats are appended."""
+    local = np.arange(len(mats) + 1) + len(found)
+    local[-1] = -1
+    found += mats
+    return np.where(tri >= 0, local[tri], -1)
+
+
+def joined_uvs(uvs, n):
+    """(n, 2) f32 UVs from (first vertex, uvs) blocks (zeros elsewhere), or
+    None when there are none."""
+    if not uvs:
+        return None
+    out = np.zeros((n, 2), np.float32)
+    for first, u in uvs:
+        out[first:first + len(u)] = u
+    return out
 
 
 def colour_slot(colours, ids, found):

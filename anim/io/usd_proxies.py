@@ -13,6 +13,7 @@ that the `id` AOV is the same either way.
 import numpy as np
 
 from anim.errors import SceneError
+from anim.io.usd_instancer import joined_uvs, material_slots
 
 
 def instance_root(prim):
@@ -84,10 +85,7 @@ class ProxyInstances:
             if mesh.uvs is not None:
                 uvs.append((offset, mesh.uvs))
             tri, mats = mesh.materials
-            local = np.arange(len(mats) + 1) + len(found)
-            local[-1] = -1
-            per_tri.append(np.where(tri >= 0, local[tri], -1))
-            found += mats
+            per_tri.append(material_slots(tri, mats, found))
             self.notes += mesh.notes
             offset += mesh.n_vertices
             face0 += len(mesh.faces)
@@ -95,11 +93,7 @@ class ProxyInstances:
         self.proxies = [p for proxies in groups for p in proxies]
         self.n_vertices = offset
         self.faces = np.ascontiguousarray(np.concatenate(faces), np.int32)
-        self.uvs = None
-        if uvs:
-            self.uvs = np.zeros((offset, 2), np.float32)
-            for o, u in uvs:
-                self.uvs[o:o + len(u)] = u
+        self.uvs = joined_uvs(uvs, offset)
         self.materials = (np.concatenate(per_tri).astype(np.int64), found)
         self.plain = np.zeros(face0, bool)
         self.skinning = None
