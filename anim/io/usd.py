@@ -466,7 +466,7 @@ class UsdObject:
         self.notes = [note for m in self.meshes for note in m.notes]
         # meshes that ask for a subdivision surface: rendered as their cage (the scene warns once)
         # a point instancer's meshes are its blocks' prototype meshes
-        meshes = [b[0] for m in self.meshes for b in getattr(m, "blocks", [(m,)])]
+        meshes = _plain_meshes(self.meshes)
         self.subdivided = [m.path for m in meshes
                            if pxr.UsdGeom.Mesh(m.prim).GetSubdivisionSchemeAttr().Get() != pxr.UsdGeom.Tokens.none]
         offsets = np.cumsum([0] + [m.n_vertices for m in self.meshes])
@@ -602,6 +602,18 @@ class UsdObject:
                 raise SceneError(self.scene_path, self.key, f"{self.path.name}: an instance transform is inf or "
                                                             f"NaN at t = {t:g}")
         return out
+
+
+def _plain_meshes(meshes):
+    """The meshes among `meshes` and inside their point instancers' (and
+    those instancers' nested instancers') prototypes."""
+    out = []
+    for m in meshes:
+        if hasattr(m, "blocks"):
+            out += _plain_meshes([b[0] for b in m.blocks])
+        else:
+            out.append(m)
+    return out
 
 
 def _lights(stage, time, pxr, notes):

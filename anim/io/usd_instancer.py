@@ -67,11 +67,9 @@ class PointInstancer:
             prims = meshes_under(root)
             if not prims:
                 self._fail(f"prototype {root.GetPath()} has no mesh")
-            for mesh_prim in prims:
-                if mesh_prim.IsA(pxr.UsdGeom.PointInstancer):
-                    self._fail(f"prototype {root.GetPath()} holds point instancer {mesh_prim.GetPath()}: nested "
-                               "point instancers are not supported yet")
-            parts.append((root, ids, [mesh_of(m) for m in prims]))
+            # a point instancer inside a prototype: its copies, made into triangles, are part of the prototype
+            parts.append((root, ids, [PointInstancer(m, pxr, meshes_under, mesh_of, scene_path, key, "flatten")
+                                      if m.IsA(pxr.UsdGeom.PointInstancer) else mesh_of(m) for m in prims]))
         copied = sum(len(ids) * len(m.faces) for _, ids, meshes in parts for m in meshes)
         self.two_level = two_level(instancing, copied, n)
         if not self.two_level:
@@ -188,14 +186,17 @@ class PointInstancer:
         if not self.prim.GetAttribute("positions") or not self.prim.GetAttribute("positions").HasAuthoredValue():
             self._fail("has no positions")
 
-    def _placement(self, pxr, time, xform_cache):
-        """(world (n, 4, 4) row-vector matrices of the instances, shown (n,) bool) at a time code."""
+    def _placement(self, pxr, time, xform_cache, relative_to=None):
+        """(world (n, 4, 4) row-vector matrices of the instances, shown (n,) bool) at a time code;
+        in the space of the prim `relative_to` (an enclosing instancer's prototype root) when given."""
         PI = pxr.UsdGeom.PointInstancer
         xf = _matrix(self.schema.ComputeInstanceTransformsAtTime(time, time, PI.IncludeProtoXform, PI.IgnoreMask))
         if len(xf) != self.n_instances:
             self._fail(f"usd-core computed {len(xf)} instance transforms at time code {time.GetValue():g}, "
                        f"not {self.n_instances}: check positions, orientations and scales")
-        world = xf @ _matrix(xform_cache.GetLocalToWorldTransform(self.prim))[0]
+        place = (xform_cache.GetLocalToWorldTransform(self.prim) if relative_to is None
+                 else xform_cache.ComputeRelativeTransform(self.prim, relative_to)[0])
+        world = xf @ _matrix(place)[0]
         if not np.all(np.isfinite(world)):
             self._fail(f"an instance transform is inf or NaN at time code {time.GetValue():g}")
         mask = self.schema.ComputeMaskAtTime(time)
@@ -216,13 +217,14 @@ class PointInstancer:
             out.append(m)
         return out
 
-    def evaluate(self, pxr, time, xform_cache):
-        """World-space points (n_vertices, 3) f64 at a time code; two-level:
-        each block's prototype mesh once, in its prototype root's space."""
+    def evaluate(self, pxr, time, xform_cache, relative_to=None):
+        """World-space points (n_vertices, 3) f64 at a time code (in the
+        space of `relative_to` when given, as a mesh's); two-level: each
+        block's prototype mesh once, in its prototype root's space."""
         if self.two_level:
             return np.concatenate([mesh.evaluate(pxr, time, xform_cache, relative_to=root)
                                    for mesh, root, _, _ in self.blocks])
-        world, shown = self._placement(pxr, time, xform_cache)
+        world, shown = self._placement(pxr, time, xform_cache, relative_to)
         out = np.empty((self.n_vertices, 3), np.float64)
         for mesh, root, ids, offset in self.blocks:
             local = mesh.evaluate(pxr, time, xform_cache, relative_to=root)

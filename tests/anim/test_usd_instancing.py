@@ -373,3 +373,62 @@ def test_instanceable_prims_two_level_match_their_flattened_frames(tmp_path):
         _same(za[None], zb[None], hits=0.02)
         assert np.mean(ia == ib) >= 0.999
         assert np.mean(np.abs(ca - cb).max(axis=-1) < 2e-3) >= 0.995
+
+
+def _nested_data(seed=9):
+    rng = np.random.default_rng(seed)
+    outer = (rng.uniform(-4, 4, (4, 3)) * [1, 0.8, 0.2], rng.normal(size=(4, 4)), rng.uniform(0.6, 1.0, (4, 3)))
+    inner = (rng.uniform(-1.5, 1.5, (3, 3)) * [1, 1, 0.3], rng.normal(size=(3, 4)), rng.uniform(0.3, 0.5, (3, 3)))
+    return [(p, q / np.linalg.norm(q, axis=1, keepdims=True), s) for p, q, s in (outer, inner)]
+
+
+def _trs(xf, p, q, s):
+    xf.AddTranslateOp().Set(Gf.Vec3d(*map(float, p)))
+    xf.AddOrientOp(UsdGeom.XformOp.PrecisionFloat).Set(Gf.Quatf(*map(float, q)))
+    xf.AddScaleOp().Set(Gf.Vec3f(*map(float, s)))
+
+
+def _pi(stage, path, protos, data):
+    pos, q, scale = data
+    pi = UsdGeom.PointInstancer.Define(stage, path)
+    pi.GetPrototypesRel().SetTargets([Sdf.Path(p) for p in protos])
+    pi.GetProtoIndicesAttr().Set(Vt.IntArray([0] * len(pos)))
+    pi.GetPositionsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, p)) for p in pos]))
+    pi.GetOrientationsfAttr().Set(Vt.QuatfArray([Gf.Quatf(*map(float, v)) for v in q]))
+    pi.GetScalesAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, v)) for v in scale]))
+
+
+@pytest.mark.parametrize("instancing", ["flatten", "two_level"])
+def test_a_point_instancer_inside_a_prototype_renders_its_copies_of_copies(tmp_path, instancing):
+    """Nested point instancers: an outer instancer whose prototype holds an
+    inner instancer (and a mesh of its own); every outer copy shows the
+    inner copies, placed by both instancers' transforms (usd-core's, each in
+    its own space), against the same world written as nested Xforms over
+    references."""
+    outer, inner = _nested_data()
+    path = tmp_path / "nested.usda"
+    stage = new_stage(path)
+    _camera(stage)
+    UsdGeom.Xform.Define(stage, "/World/Outer/Protos/P")
+    _prototypes(stage, "/World/Outer/Protos/P/Inner/Protos/Q")
+    _pi(stage, "/World/Outer/Protos/P/Inner", ["/World/Outer/Protos/P/Inner/Protos/Q"], inner)
+    pts, counts, idx = tube(n_around=6, n_along=2, length=1.0, radius=0.3)
+    mesh(stage, "/World/Outer/Protos/P/Box", pts, counts, idx)
+    _pi(stage, "/World/Outer", ["/World/Outer/Protos/P"], outer)
+    stage.GetRootLayer().Save()
+    flat_path = tmp_path / "flat.usda"
+    flat = new_stage(flat_path)
+    _camera(flat)
+    _prototypes(flat, "/Q")
+    flat.GetPrimAtPath("/Q").SetSpecifier(Sdf.SpecifierClass)
+    for i in range(4):
+        _trs(UsdGeom.Xform.Define(flat, f"/World/O{i}"), outer[0][i], outer[1][i], outer[2][i])
+        for j in range(3):
+            copy = UsdGeom.Xform.Define(flat, f"/World/O{i}/I{j}")
+            _trs(copy, inner[0][j], inner[1][j], inner[2][j])
+            copy.GetPrim().GetReferences().AddInternalReference("/Q")
+        mesh(flat, f"/World/O{i}/Box", pts, counts, idx)
+    flat.GetRootLayer().Save()
+    got = _depth(path, tmp_path / "a", "0:0", instancing=instancing)
+    want = _depth(flat_path, tmp_path / "b", "0:0")
+    _same(got, want, hits=0.02)
