@@ -207,7 +207,7 @@ class FrameRender:
                          "primary_packets": 0, "primary_visits": 0, "primary_tests": 0, "builds": 0, "passes": 0}
         if structures is None and geom.instances is not None:
             structures = InstancedStructures(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces,
-                                             geom.instances)
+                                             geom.instances.ranges, geom.instances.moving)
         elif structures is None:
             structures = FrameStructures(geom.faces, len(geom.vertices), geom.vf_start, geom.vf_faces,
                                          cfg.grid_density)

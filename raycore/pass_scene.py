@@ -32,8 +32,10 @@ class PassScene:
         these instances: instancing/world.InstanceFrame), when they changed."""
         cfg, t0 = self.cfg, time.perf_counter()
         if instances is not None and instances is not self.geom.instances:
+            # a pass at another time: built again when a copy moved (not when only the camera did)
+            if not np.array_equal(instances.matrices, self.geom.instances.matrices):
+                self.built_vertices = None
             self.geom = self.geom._replace(instances=instances)
-            self.built_vertices = None
         if self.built_vertices is None or not np.array_equal(vertices, self.built_vertices):
             geom = self.geom._replace(vertices=vertices)
             self.tri_verts, built = self.structures.build(self.names, geom, self.cfg, self.buffers,

@@ -35,9 +35,8 @@ class SceneRenderer:
         if structures is not None:
             self.structures = structures
         elif scene.two_level:
-            self.structures = InstancedStructures(scene.faces, scene.n_vertices, *self.vf,
-                                                  scene.instances_at(scene.time_of(scene.frame_numbers[0])),
-                                                  scene.world_ranges)
+            self.structures = InstancedStructures(scene.faces, scene.n_vertices, *self.vf, scene.proto_ranges,
+                                                  scene.proto_moving, scene.world_ranges)
         else:
             self.structures = FrameStructures(scene.faces, scene.n_vertices, *self.vf, cfg.grid_density,
                                               scene.moving_triangles, scene.moving_object_ranges)

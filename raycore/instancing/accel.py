@@ -20,7 +20,6 @@ class InstancedAccel:
     def __init__(self, top, trees, place, workspace=None):
         self.top, self.trees, self.place, self.workspace = top, trees, place, workspace
         self.world = (top, trees, place.tree, place.inverse, place.origin)
-        self.bvh = None      # no single tree: the frame's sweep, which walks one, is not used (frame.sweeps_in_one)
 
     def trace_camera(self, cam, width, height, jitter):
         n = width * height

@@ -20,9 +20,10 @@ import numba
 import numpy as np
 
 from raycore.bvh.build import build_region
-from raycore.bvh.nodes import Bvh, empty_bvh
+from raycore.bvh.nodes import empty_bvh
 from raycore.bvh.scene import SceneBvh
 from raycore.geometry.mesh import gather_some_triangles, gather_triangles, vertex_normals, vertex_normals_of
+from raycore.instancing.accel import InstancedAccel
 from raycore.jit.presets import parallel_kernel
 
 # an instance's world box is widened by this fraction of its largest
@@ -47,7 +48,7 @@ class InstanceFrame(NamedTuple):
 class Placement(NamedTuple):
     """Every instance the traversal sees (the world's trees under the identity first)."""
     tree: np.ndarray         # (M,) int64: root node of the instance's tree
-    inverse: np.ndarray      # (M, 12) f32: object from world as rows [L^-1 | T]: p -> L^-1 (p - T)
+    inverse: np.ndarray      # (M, 12) f32: rows [L^-1 | 0]; object from world is p -> L^-1 (p - origin)
     forward: np.ndarray      # (M, 12) f32: world from object
     identity: np.ndarray     # (M,) bool
     material: np.ndarray     # (M,) int32
@@ -89,9 +90,9 @@ def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forwar
     its tree's root, its inverse and itself as float32 rows, and whether it
     is shown: a prototype with a tree, an invertible matrix, an inverse
     finite in float32 (a copy scaled to nothing is hidden, as a hidden
-    copy's zero matrix is). The inverse's rows are the inverse 3x3 and the
-    translation T (float32), and origin[j] is T in float64: a point maps to
-    L^-1 (p - T), its subtraction in float64, so that the copy is where its
+    copy's zero matrix is). The inverse's rows hold the inverse 3x3 L^-1
+    (their 4th column 0), and origin[j] the translation T in float64: a
+    point maps to L^-1 (p - T), its subtraction in float64, so that the copy is where its
     matrix puts it however far from the world's origin (a 3x4 inverse's
     -L^-1 T cancels against L^-1 p and loses the digits of both: depth 0.4 %
     out 10^5 units away, where flattened copies are 0.01 % out)."""
@@ -108,14 +109,12 @@ def invert_instances(matrices, proto, proto_tree, node_lo, tree, inverse, forwar
         ok = det != 0.0 and t >= 0
         r = 1.0 / det if ok else 0.0
         lin = (c00 * r, c01 * r, c02 * r, c10 * r, c11 * r, c12 * r, c20 * r, c21 * r, c22 * r)
-        tx, ty, tz = m[3], m[7], m[11]
-        shift = (tx, ty, tz)
-        origin[j, 0], origin[j, 1], origin[j, 2] = tx, ty, tz
+        origin[j, 0], origin[j, 1], origin[j, 2] = m[3], m[7], m[11]
         for row in range(3):
             inverse[j, 4 * row] = lin[3 * row]
             inverse[j, 4 * row + 1] = lin[3 * row + 1]
             inverse[j, 4 * row + 2] = lin[3 * row + 2]
-            inverse[j, 4 * row + 3] = shift[row]
+            inverse[j, 4 * row + 3] = 0.0
         for q in range(12):
             forward[j, q] = m[q]
             ok = ok and np.isfinite(inverse[j, q])
@@ -127,33 +126,35 @@ class InstancedStructures:
     """The structures of an instanced world, kept from frame to frame: the
     frame's triangle corners and vertex normals (every object once, the
     prototypes in their own space), the trees, and the top level.
-    world_ranges: (first, end) face ranges of the world's moving objects
-    (one tree each); every other world triangle in one static tree."""
+    ranges, moving: the prototypes' face ranges and whether each deforms
+    (as InstanceFrame has them); world_ranges: (first, end) face ranges of
+    the world's moving objects (one tree each); every other world triangle
+    in one static tree."""
 
-    def __init__(self, faces, n_vertices, vf_start, vf_faces, frame: InstanceFrame, world_ranges=()):
+    def __init__(self, faces, n_vertices, vf_start, vf_faces, ranges, moving, world_ranges=()):
         self.faces, self.vf_start, self.vf_faces = faces, vf_start, vf_faces
         n = faces.shape[0]
         self.tri_verts = np.empty((n, 9), np.float32)
         self.normals = np.empty((n_vertices, 3), np.float32)
         in_world = np.ones(n, bool)
-        for s, e in frame.ranges:
+        for s, e in ranges:
             in_world[s:e] = False
-        groups, moving = [], []
+        groups, deforms = [], []
         for s, e in world_ranges:
             groups.append(np.arange(s, e, dtype=np.int32))
-            moving.append(True)
+            deforms.append(True)
             in_world[s:e] = False
         groups.append(np.nonzero(in_world)[0].astype(np.int32))
-        moving.append(False)
+        deforms.append(False)
         n_world = len(groups)
-        for (s, e), m in zip(frame.ranges, frame.moving):
+        for (s, e), m in zip(ranges, moving):
             groups.append(np.arange(s, e, dtype=np.int32))
-            moving.append(bool(m))
+            deforms.append(bool(m))
         # after the first frame only the moving triangles (the world's moving objects, deforming
         # prototypes) are gathered again and their vertices given normals again: a large static
         # set among the copies costs nothing per frame
         still = np.ones(n, bool)
-        for g, m in zip(groups, moving):
+        for g, m in zip(groups, deforms):
             if m:
                 still[g] = False
         self.moving_tris = np.ascontiguousarray(np.nonzero(~still)[0], np.int32)
@@ -162,12 +163,11 @@ class InstancedStructures:
         self.gathered = self.normals_done = False
         # SceneBvh keeps the groups with triangles: its tree k is groups[kept[k]]
         kept = [g for g, tris in enumerate(groups) if len(tris)]
-        self.trees = SceneBvh(n, groups, moving, faces)
+        self.trees = SceneBvh(n, groups, deforms, faces)
         tree_of_group = {g: k for k, g in enumerate(kept)}
         self.world_trees = np.array([tree_of_group[g] for g in range(n_world) if g in tree_of_group], np.int64)
         # a prototype without triangles has no tree: its instances are left out
-        self.proto_tree = np.array([tree_of_group.get(n_world + p, -1) for p in range(len(frame.ranges))],
-                                   np.int64)
+        self.proto_tree = np.array([tree_of_group.get(n_world + p, -1) for p in range(len(ranges))], np.int64)
         self.top = None
         self.stats = {}
 
@@ -236,12 +236,11 @@ class InstancedStructures:
                          numba.get_num_threads())
             top.tri[:m] = order
         self.stats["instances"] = m - len(self.world_trees)
-        return self.tri_verts, bvh, Bvh(top.node, top.node_i, top.tri, top.verts), place
+        return self.tri_verts, bvh, top, place
 
     def build(self, names, geom, cfg, buffers, counters) -> tuple:
         """(tri_verts, {name: accelerator}): one two-level structure serves
         every name asked for (camera and shadow rays)."""
-        from raycore.instancing.accel import InstancedAccel
         tri_verts, bvh, top, place = self.update(geom.vertices, geom.instances)
         counters.update(self.stats)
         accel = InstancedAccel(top, bvh, place, buffers.work)

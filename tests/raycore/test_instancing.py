@@ -65,7 +65,8 @@ def flattened(vertices, faces, frame):
 
 def structure(vertices, faces, frame):
     from raycore.instancing.accel import InstancedAccel
-    s = InstancedStructures(faces, len(vertices), *vertex_face_csr(faces, len(vertices)), frame)
+    s = InstancedStructures(faces, len(vertices), *vertex_face_csr(faces, len(vertices)), frame.ranges,
+                            frame.moving)
     tri_verts, bvh, top, place = s.update(vertices, frame)
     return s, InstancedAccel(top, bvh, place)
 
