@@ -121,11 +121,16 @@ def trace_batch(bvh, order, n_active, origin, direction, t_min, t_max, any_hit, 
 
 
 @helper
-def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted, geo_n,
-                     smooth_n, mag, offset_ulps, skip):
-    """Samples base..base+n-1's shadow rays to one light into a packet, made
-    here from the samples (the same rays geometry/light_rays.light_rays makes);
-    inactive ones dead. Returns how many are active."""
+def load_light_packet(ray, h_t, h_b1, h_b2, prim, n, base, lights, j, lifted, geo_n, smooth_n, mag, offset_ulps,
+                      skip):
+    """Samples base..base+n-1's shadow rays to light j (lights: kind, x, y,
+    z) into a packet, made here from the samples (the same rays
+    geometry/light_rays.light_rays makes); inactive ones dead. Returns
+    (how many are active, the packet's mode: the rays share the point
+    light as origin, or the directional light's direction)."""
+    kind = int(lights[j, 0])
+    lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
+    light_mag = max(abs(lx), max(abs(ly), abs(lz)))
     live = 0
     if kind == 0:
         for r in range(n):
@@ -154,7 +159,16 @@ def _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, ligh
         h_b1[r] = F0
         h_b2[r] = F0
         prim[r] = -1
-    return live
+    return live, SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+
+
+@helper
+def store_light_vis(vis, out, base, n, ray, h_t):
+    """A light packet's visibility into vis[out, base..base+n-1]: lit where
+    the ray is active (t_max >= t_min, which an inactive ray's -1 is not)
+    and not occluded (-inf)."""
+    for r in range(n):
+        vis[out, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
 
 
 @helper
@@ -165,17 +179,11 @@ def _light_packet(bvh, lights, rows, base, n, lifted, geo_n, smooth_n, mag, offs
     many rays were active."""
     live = 0
     for j in range(rows.shape[0]):
-        kind = int(lights[j, 0])
-        lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
-        light_mag = max(abs(lx), max(abs(ly), abs(lz)))
-        live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
-                                 geo_n, smooth_n, mag, offset_ulps, skip)
-        mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+        active, mode = load_light_packet(ray, h_t, h_b1, h_b2, prim, n, base, lights, j, lifted, geo_n, smooth_n,
+                                         mag, offset_ulps, skip)
+        live += active
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, True, True, mode, ia, planes, stack, counters, row)
-        # lit: active (t_max >= t_min, which an inactive ray's -1 is not) and not occluded (-inf)
-        out = rows[j]
-        for r in range(n):
-            vis[out, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
+        store_light_vis(vis, rows[j], base, n, ray, h_t)
     return live
 
 
@@ -266,6 +274,30 @@ def load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx,
     return n
 
 
+@helper
+def store_camera_tile(h_t, h_b1, h_b2, prim, inst, x0, y0, width, height, side, out_t, out_prim, out_inst, out_b1,
+                      out_b2):
+    """A camera tile's hits (load_camera_tile's order; prim: the triangle
+    ids, -1 none) into the row-major images, and each hit's instance
+    (inst) where out_inst is not empty (an instanced world's)."""
+    with_inst = out_inst.shape[0] > 0
+    q = 0
+    for yy in range(side):
+        for xx in range(side):
+            x = x0 + xx
+            y = y0 + yy
+            if x < width and y < height:
+                i = y * width + x
+                hit = prim[q] >= 0
+                out_prim[i] = prim[q]
+                out_t[i] = h_t[q] if hit else INF
+                out_b1[i] = h_b1[q]
+                out_b2[i] = h_b2[q]
+                if with_inst:
+                    out_inst[i] = inst[q] if hit else -1
+            q += 1
+
+
 @kernel
 def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, out_b1, out_b2, counters):
     """Closest hits of the camera rays (offset jx, jy), row-major: the
@@ -275,6 +307,7 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, ou
     tiles_x = (width + side - 1) // side
     n_tiles = tiles_x * ((height + side - 1) // side)
     ray, h_t, h_b1, h_b2, prim, ia, planes, stack = scratch()
+    no_inst = np.empty(0, np.int32)            # hits without instances (store_camera_tile)
     while True:
         p = next_tile(queue, n_tiles)
         if p < 0:
@@ -284,19 +317,10 @@ def trace_camera_bvh(bvh, cam, width, height, jx, jy, queue, out_t, out_prim, ou
         n = load_camera_tile(ray, h_t, h_b1, h_b2, prim, cam, width, height, x0, y0, jx, jy, side)
         _trace_packet(bvh, ray, h_t, h_b1, h_b2, prim, n, False, False, SHARED_ORIGIN, ia, planes, stack,
                       counters, p)
-        n = 0
-        for yy in range(side):
-            for xx in range(side):
-                x = x0 + xx
-                y = y0 + yy
-                if x < width and y < height:
-                    i = y * width + x
-                    k = prim[n]
-                    out_prim[i] = bvh.tri[k] if k >= 0 else -1
-                    out_t[i] = h_t[n] if k >= 0 else INF
-                    out_b1[i] = h_b1[n]
-                    out_b2[i] = h_b2[n]
-                n += 1
+        for r in range(n):
+            prim[r] = bvh.tri[prim[r]] if prim[r] >= 0 else -1
+        store_camera_tile(h_t, h_b1, h_b2, prim, prim, x0, y0, width, height, side, out_t, out_prim, no_inst,
+                          out_b1, out_b2)
 
 
 # --- plain-Python wrappers: validate, allocate, call ------------------------

@@ -19,10 +19,11 @@ from raycore.bvh.nodes import CHILD, COUNT, STACK
 from raycore.bvh.packets import (CHUNK_BITS, DX, DY, DZ, HINT_BITS, LANES, N_CHUNKS, NODE_SHIFT, OX, OY, OZ, PACKET,
                                  SHARED_DIRECTION, SHARED_ORIGIN, SINGLE, TMIN, N_ROWS, _chunks_hitting_box,
                                  _push_children, ray_hits_box, set_inverse, trace_single, walk_packet)
-from raycore.bvh.trace import _load_light_rays, load_batch_packet, load_camera_tile, store_batch_packet
+from raycore.bvh.trace import (load_batch_packet, load_camera_tile, load_light_packet, store_batch_packet,
+                               store_camera_tile, store_light_vis)
 from raycore.config import EPS_OFFSET_ULPS
 from raycore.jit.counters import FALLBACK_RAYS, N_COUNTERS, PACKETS, VISITS
-from raycore.jit.floats import F0, F1, INF
+from raycore.jit.floats import F0, INF
 from raycore.jit.presets import helper, kernel
 from raycore.jit.thread_pool import on_threads
 from raycore.jit.tile_queue import new_queue, next_tile
@@ -200,20 +201,8 @@ def world_camera(top, trees, place_tree, inverse, place_t, cam, width, height, j
         walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, False, False,
                    SHARED_ORIGIN, local, ia, planes, stack, top_stack, counters, p)
         counters[p, PACKETS] += 1
-        q = 0
-        for yy in range(side):
-            for xx in range(side):
-                x = x0 + xx
-                y = y0 + yy
-                if x < width and y < height:
-                    i = y * width + x
-                    hit = prim[q] >= 0
-                    out_prim[i] = prim[q] if hit else -1
-                    out_inst[i] = inst[q] if hit else -1
-                    out_t[i] = h_t[q] if hit else INF
-                    out_b1[i] = h_b1[q]
-                    out_b2[i] = h_b2[q]
-                q += 1
+        store_camera_tile(h_t, h_b1, h_b2, prim, inst, x0, y0, width, height, side, out_t, out_prim, out_inst,
+                          out_b1, out_b2)
 
 
 @kernel
@@ -263,18 +252,13 @@ def world_light_samples(top, trees, place_tree, inverse, place_t, lights, rows, 
         base = p * PACKET
         n = min(PACKET, n_samples - base)
         for j in range(rows.shape[0]):
-            kind = int(lights[j, 0])
-            lx, ly, lz = lights[j, 1], lights[j, 2], lights[j, 3]
-            light_mag = max(abs(lx), max(abs(ly), abs(lz)))
-            live += _load_light_rays(ray, h_t, h_b1, h_b2, prim, n, base, kind, lx, ly, lz, light_mag, lifted,
-                                     geo_n, smooth_n, mag, offset_ulps, skip)
-            mode = SHARED_ORIGIN if kind == 0 else SHARED_DIRECTION
+            active, mode = load_light_packet(ray, h_t, h_b1, h_b2, prim, n, base, lights, j, lifted, geo_n,
+                                             smooth_n, mag, offset_ulps, skip)
+            live += active
             walk_world(top, trees, place_tree, inverse, place_t, ray, h_t, h_b1, h_b2, prim, inst, n, True, True, mode,
                        local, ia, planes, stack, top_stack, counters, p)
             counters[p, PACKETS] += 1
-            out = rows[j]
-            for r in range(n):
-                vis[out, np.uint64(base + r)] = F1 if h_t[r] >= ray[TMIN, r] else F0
+            store_light_vis(vis, rows[j], base, n, ray, h_t)
     return live
 
 
