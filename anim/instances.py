@@ -46,10 +46,13 @@ def quaternion_matrices(q):
                      np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
 
 
-class LinearKeys:
+class LinearTrack:
     """Keyed values (k, ...) interpolated linearly, as a linear Curve (the
     keys exact, clamped or looped) without its per-segment coefficients:
-    four times the keys' memory, which a table of many copies feels."""
+    four times the keys' memory, which a table of many copies feels. Not
+    anim/keyframes.LinearKeys: that one holds vertex keys in float32 (and
+    may spill them to disk); a copy's translation stays float64, so that a
+    copy far from the origin is where its keys put it."""
 
     def __init__(self, times, values, extrapolate):
         self.times, self.values, self.extrapolate = times, np.asarray(values, np.float64), extrapolate
@@ -66,9 +69,9 @@ class LinearKeys:
 
 
 def keyed(times, values, method, extrapolate):
-    """An instance table's translation or scale keys: LinearKeys for linear
-    interpolation, else a Curve of the method."""
-    return LinearKeys(times, values, extrapolate) if method == "linear" else Curve(times, values, method, extrapolate)
+    """An instance table's translation or scale keys: a LinearTrack for
+    linear interpolation, else a Curve of the method."""
+    return LinearTrack(times, values, extrapolate) if method == "linear" else Curve(times, values, method, extrapolate)
 
 
 class InstanceTable:
