@@ -262,16 +262,16 @@ class SceneObject:
                                           for c in curves)
 
     def segments(self):
-        """(first face, end, copies[, where]) of the object's faces: copies >
+        """(first face, end, copies, where) of the object's faces: copies >
         0 for a two-level prototype (its faces once here, each copy's in the
-        flattened world), 0 for faces placed as they are; `where` (a file's):
-        each copy's (or the faces') first triangle in the flattened object,
-        else they follow one another in this order."""
+        flattened world), 0 for faces placed as they are; where: each copy's
+        (or the faces') first triangle in the flattened object."""
+        n = len(self.faces)
         if self.two_level and self.instances is not None:
-            return [(0, len(self.faces), self.instances.n)]
+            return [(0, n, self.instances.n, np.arange(self.instances.n, dtype=np.int64) * n)]
         if self.two_level:
             return self.file.segments
-        return [(0, len(self.faces), 0)]
+        return [(0, n, 0, np.zeros(1, np.int64))]
 
     def blocks(self):
         """Per two-level prototype: (whether it deforms, its copies' material
@@ -587,11 +587,8 @@ class AnimatedScene:
                 self.plain[fo:fo + len(o.faces)] = o.file.plain
             blocks = iter(o.blocks() if o.two_level else ())
             size = 0                      # the object's triangles in the flattened world
-            for seg in o.segments():
-                lo, hi, copies = seg[:3]
+            for lo, hi, copies, at in o.segments():
                 n = hi - lo
-                # where the flattened world numbers them: as given (a file's order), else one after another
-                at = seg[3] if len(seg) > 3 else size + np.arange(max(copies, 1), dtype=np.int64) * n
                 if copies:
                     deforms, slots = next(blocks)
                     id_base.append(flat + at - (fo + lo))
@@ -626,8 +623,8 @@ class AnimatedScene:
     def world_ranges(self):
         """(first, end) triangle ranges of the moving objects' faces that are
         not two-level prototypes (one tree each in an instanced world)."""
-        return [(o.face_offset + seg[0], o.face_offset + seg[1]) for o in self.moving for seg in o.segments()
-                if not seg[2]]
+        return [(o.face_offset + lo, o.face_offset + hi) for o in self.moving for lo, hi, copies, _ in o.segments()
+                if not copies]
 
     @property
     def key_bytes(self):

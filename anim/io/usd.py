@@ -501,7 +501,7 @@ class UsdObject:
             face0 += len(m.faces)
         self.face_material = np.concatenate(face_material)
         self.plain = np.concatenate(plain)
-        self.two_level = any(seg[2] for seg in self.segments)
+        self.two_level = any(copies for _, _, copies, _ in self.segments)
         self.static = all(m.static for m in self.meshes)
         self.rigid = all(m.rigid for m in self.meshes)     # moved by transforms only
         self.rest = self._evaluate(0.0, every=True)
