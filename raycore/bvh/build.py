@@ -13,6 +13,9 @@ Keyframed meshes keep their topology, so a tree built once is refit every
 frame (bvh/refit.py) and rebuilt only when its SAH cost has grown past a
 threshold measured against the cost at its last build.
 """
+import heapq
+import threading
+
 import numpy as np
 
 from numba.cpython.unsafe.numbers import trailing_zeros
@@ -110,18 +113,18 @@ def _span(prims, cents, s, e, out, row):
         min_rows(cen, 0, cents, k)
 
 
-# count of a node whose subtree is left to a task (build_region's top
-# phase); its child is the task's number
+# count of a node whose subtree is left to a job of its own
+# (_split_on_threads); its child is the job's number among those its split made
 DEFERRED = -4
 
 
 @kernel
-def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, box, child, count, stop_n,
+def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, box, child, count, stop_n,
                  task_s, task_e, task_d, task_span):
     """Binned-SAH subtree over primitives s0..e0-1 (their box and centroid
-    bounds span0 (16,), at depth depth0) into the scratch nodes root, root + 1, ...
-    (children in pairs after their parent, in the order build_region lays
-    them out). A node of fewer than stop_n primitives is not split here:
+    bounds span0 (16,), at depth depth0) into the scratch node root and,
+    for its descendants, the nodes alloc0, alloc0 + 1, ... (children in pairs).
+    A node of fewer than stop_n primitives is not split here:
     it is marked DEFERRED and listed in task_* (first, end, depth, span),
     for build_region's workers. Returns (one past the last node used, tasks).
     prims, cents (m, 8): see ROW; the partition moves their rows in place."""
@@ -136,7 +139,7 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, box, child
     for q in range(2 * ROW):
         st_span[0, q] = span0[q]
     top = 1
-    alloc = root + 1
+    alloc = alloc0
     n_tasks = 0
     # bins start empty and are left empty: a node clears only those it
     # filled (bit b of filled[a]: bin b of axis a), and its sweeps visit only
@@ -283,9 +286,9 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, box, child
 
 
 @kernel
-def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count):
-    """The scratch tree (root 0, DEFERRED nodes continued at their task's
-    root) copied into box, child, count from node0 (leaves' references
+def _relayout(s_box, s_child, s_count, node0, ref0, box, child, count):
+    """The scratch tree (root 0, children in pairs wherever the build put
+    them) copied into box, child, count from node0 (leaves' references
     from ref0) in depth-first order, children in pairs, left subtree first: the layout a single pass of
     _build_nodes makes, which refit_plan relies on. Returns the nodes used
     and the tree's SAH cost (as sah_cost, summed on the way)."""
@@ -298,8 +301,6 @@ def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count
     while top > 0:
         top -= 1
         src, dst = st_src[top], st_dst[top]
-        if s_count[src] == DEFERRED:
-            src = task_root[s_child[src]]
         for q in range(6):
             box[dst, q] = s_box[src, q]
         c = s_count[src]
@@ -321,15 +322,21 @@ def _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count
     return alloc - node0, np.float32(total / root_area) if root_area > 0 else np.float32(0.0)
 
 
-# build_region's top phase splits nodes down to about 1 / TASKS_PER_TREE
-# of the primitives; the subtrees below are built by all threads, pulled
-# from a queue (more tasks than threads, so the load balances). The workers
-# are Python threads (jit/thread_pool.py), each calling the nogil kernel
-# _build_nodes: as a numba parallel kernel (prange over the queue) the
-# build compiled in 11 s instead of 4, its big loop optimized again inside
-# the parallel region
-TASKS_PER_TREE = 16
-MIN_TASK = 256
+# build_region splits a tree's nodes of at least ~m / TASKS_PER_TREE
+# primitives one split at a time, each split a job for the next free
+# thread, the largest first (its two halves become jobs), and builds each
+# node below that whole, as one job: from the second level on every thread
+# has work (a first phase of splits on one thread down to m / 16 took a
+# fifth of a 10M-triangle build). The workers are Python threads
+# (jit/thread_pool.py), each calling the nogil kernel _build_nodes: as a
+# numba parallel kernel (prange over the queue) the build compiled in 11 s
+# instead of 4, its big loop optimized again inside the parallel region
+TASKS_PER_TREE = 32
+# jobs below this many primitives are not split further (a job costs ~20-30 us
+# of Python and dispatch: 256 made 100K-triangle builds 5 % slower)
+MIN_TASK = 2048
+# the build's rows are made on all threads from this many primitives on
+PARALLEL_ROWS = 1 << 16
 
 
 @kernel
@@ -352,12 +359,13 @@ def _start_build(bounds, centroids, prims, cents, span0):
 
 
 @kernel
-def _start_build_tris(tri_verts, tris, prims, cents, span0):
-    """_start_build's rows straight from triangles tris of tri_verts, with
-    prim_bounds's boxes and centroids, bit for bit, and without their
-    (m, 9) arrays: a first build at 10M triangles held 360 MB of them."""
+def _start_build_tris(tri_verts, tris, prims, cents, spans, j, k0, k1):
+    """_start_build's rows k0..k1-1 straight from triangles tris[k0:k1] of
+    tri_verts, with prim_bounds's boxes and centroids, bit for bit, and
+    without their (m, 9) arrays (a first build at 10M triangles held 360 MB
+    of them); spans[j]: those rows' span (part j of _rows_of_tris)."""
     prims_i = prims.view(np.int32)
-    for k in range(tris.shape[0]):
+    for k in range(k0, k1):
         t = tris[k]
         for a in range(3):
             lo, hi = _tri_extent(tri_verts, t, a)
@@ -370,14 +378,43 @@ def _start_build_tris(tri_verts, tris, prims, cents, span0):
         prims[k, 7] = np.float32(0.0)
         cents[k, 3] = np.float32(0.0)
         cents[k, 7] = np.float32(0.0)
-    _span(prims, cents, 0, tris.shape[0], span0, 0)
+    _span(prims, cents, k0, k1, spans, j)
+
+
+def on_parts(kernel, n, n_parts, *args):
+    """kernel(*args, j, k0, k1) for each part j (k0..k1-1) of n_parts
+    consecutive parts of 0..n-1, at once on as many threads (one part: on
+    this thread)."""
+    cuts = np.linspace(0, n, max(n_parts, 1) + 1).astype(np.int64).tolist()
+    parts = [(j, cuts[j], cuts[j + 1]) for j in range(len(cuts) - 1)]
+    if len(parts) == 1:
+        kernel(*args, *parts[0])
+        return
+    pool = thread_pool("bvh-build", len(parts) - 1)
+    others = [pool.submit(kernel, *args, *part) for part in parts[1:]]
+    try:
+        kernel(*args, *parts[0])
+    finally:
+        for f in others:
+            f.result()
+
+
+def _rows_of_tris(tri_verts, tris, n_workers):
+    """The build's rows (prims, cents, span0) of triangles tris, made on
+    n_workers threads from PARALLEL_ROWS triangles on (the span of each
+    part, then their minimum: every lane of a span is one)."""
+    m = tris.shape[0]
+    prims, cents, _ = _empty_rows(m)
+    n_parts = max(n_workers, 1) if m >= PARALLEL_ROWS else 1
+    spans = np.empty((n_parts, 2 * ROW), np.float32)
+    on_parts(_start_build_tris, m, n_parts, tri_verts, tris, prims, cents, spans)
+    return prims, cents, spans.min(axis=0, keepdims=True)
 
 
 def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
     """build_region over the triangles tris of tri_verts (their boxes and
     centroids as prim_bounds gives them), the same tree."""
-    prims, cents, span0 = _empty_rows(tris.shape[0])
-    _start_build_tris(tri_verts, tris, prims, cents, span0)
+    prims, cents, span0 = _rows_of_tris(tri_verts, tris, n_workers)
     return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
 
 
@@ -390,11 +427,11 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     (sah_cost's, summed while laying it out). bounds and centroids are
     read only (copied into the build's rows, see ROW).
 
-    The nodes above ~m / TASKS_PER_TREE primitives are split on one thread;
-    the subtrees below them by n_workers threads into disjoint scratch
-    regions; then one pass lays the nodes out as a single serial pass
-    would, so the tree does not depend on the thread count (nor on whether
-    it was built in parallel at all)."""
+    Nodes of ~m / TASKS_PER_TREE primitives and more are split one at a
+    time by n_workers threads, the subtrees below them built whole, each
+    into a scratch region of its own; then one pass lays the nodes out as a
+    single serial pass would, so the tree does not depend on the thread
+    count (nor on whether it was built in parallel at all)."""
     prims, cents, span0 = _empty_rows(bounds.shape[0])
     _start_build(bounds, centroids, prims, cents, span0)
     return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
@@ -408,43 +445,88 @@ def _empty_rows(m):
 def _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers):
     """build_region from its primitives' rows (prims, cents, span0)."""
     m = prims.shape[0]
-    # a binary tree over m primitives has at most 2m - 1 nodes: the top
-    # phase's first, then each task's from 2 x its first primitive on
-    n_scratch = 4 * m + 1
+    # scratch nodes: the root (0) and the split jobs' children, pairs from 1
+    # on (at most one split per primitive), then each subtree built whole
+    # from 2m + 2 + 2 x its first primitive (its descendants: < 2 x its primitives)
+    n_scratch = 4 * m + 2
     s_box = np.empty((n_scratch, 6), np.float32)
     s_child = np.empty(n_scratch, np.int64)
     s_count = np.empty(n_scratch, np.int64)
-    stop_n = max(m // TASKS_PER_TREE, MIN_TASK) if n_workers > 1 and m >= 2 * MIN_TASK else 0
-    n_max = m + 1 if stop_n else 1          # tasks hold disjoint runs of primitives
-    task_s, task_e, task_d = (np.empty(n_max, np.int64) for _ in range(3))
-    task_span = np.empty((n_max, 2 * ROW), np.float32)
-    top_end, n_tasks = _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count,
-                                    stop_n, task_s, task_e, task_d, task_span)
-    task_root = top_end + 2 * task_s[:n_tasks]
-    if n_tasks:
-        tasks = iter(range(n_tasks))            # next() on it is atomic under the GIL
+    no_task = np.empty(1, np.int64)
+    if n_workers > 1 and m >= 2 * MIN_TASK:
+        _split_on_threads(prims, cents, span0[0], max_leaf, s_box, s_child, s_count, n_workers,
+                          max(m // TASKS_PER_TREE, MIN_TASK))
+    else:
+        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
+                     no_task, no_task, no_task, np.empty((1, 2 * ROW), np.float32))
+    order[:] = prims.view(np.int32)[:, 3]
+    return _relayout(s_box, s_child, s_count, node0, ref0, box, child, count)
 
-        def work():
-            for t in tasks:
-                _build_nodes(prims, cents, max_leaf, task_s[t], task_e[t], task_d[t], task_span[t],
-                             task_root[t], s_box, s_child, s_count, 0, task_s, task_e, task_d, task_span)
 
-        pool = thread_pool("bvh-build", n_workers - 1)
-        helpers = [pool.submit(work) for _ in range(min(n_workers, n_tasks) - 1)]
+def _split_on_threads(prims, cents, span0, max_leaf, s_box, s_child, s_count, n_workers, stop_n):
+    """The tree over all m rows into the scratch nodes (root 0) by n_workers
+    threads, sharing one list of jobs, the largest first: a job of at least
+    stop_n primitives is one split (its node and its children's pair; the
+    children become jobs), a smaller one its whole subtree."""
+    m = prims.shape[0]
+    base = 2 * m + 2
+    jobs = [(-m, 0, m, 1, span0.copy(), 0)]       # (-size, first, end, depth, span, node)
+    state = {"pairs": 1, "busy": 0}
+    ready = threading.Condition()
+
+    def work():
+        two_s, two_e, two_d = (np.empty(2, np.int64) for _ in range(3))
+        two_span = np.empty((2, 2 * ROW), np.float32)
+        while True:
+            with ready:
+                while not jobs and state["busy"]:
+                    ready.wait()
+                if not jobs:
+                    return
+                _, s, e, depth, span, node = heapq.heappop(jobs)
+                state["busy"] += 1
+                split = e - s >= stop_n
+                if split:
+                    pair = state["pairs"]
+                    state["pairs"] += 2
+            new = []
+            try:
+                if split:
+                    # stop_n = the job's size: the node is split, its children deferred as two jobs
+                    _, n_new = _build_nodes(prims, cents, max_leaf, s, e, depth, span, node, pair, s_box,
+                                            s_child, s_count, e - s, two_s, two_e, two_d, two_span)
+                    for t in range(n_new):
+                        at = pair if s_child[pair] == t else pair + 1
+                        new.append((-int(two_e[t] - two_s[t]), int(two_s[t]), int(two_e[t]), int(two_d[t]),
+                                    two_span[t].copy(), at))
+                else:
+                    _build_nodes(prims, cents, max_leaf, s, e, depth, span, node, base + 2 * s, s_box, s_child,
+                                 s_count, 0, two_s, two_e, two_d, two_span)
+            finally:
+                with ready:
+                    for job in new:
+                        heapq.heappush(jobs, job)
+                    state["busy"] -= 1
+                    ready.notify_all()
+
+    pool = thread_pool("bvh-build", n_workers - 1)
+    helpers = [pool.submit(work) for _ in range(n_workers - 1)]
+    try:
         work()
+    finally:
         for h in helpers:
             h.result()
-    order[:] = prims.view(np.int32)[:, 3]
-    return _relayout(s_box, s_child, s_count, task_root, node0, ref0, box, child, count)
 
 
 @kernel
-def gather_references(tris, order, tri_verts, faces, r0, tri, verts, leaf_faces):
+def gather_references(tris, order, tri_verts, faces, r0, tri, verts, leaf_faces, j, k0, k1):
     """References r0, r0 + 1, ... in leaf order (build_region's `order` of
     the triangles `tris`): each one's global id, corners and vertex ids,
-    in one pass (numpy's three gathers took 15 % of a build; on one thread,
-    as prim_bounds, so that no spinning thread slows the next tree's build)."""
-    for k in range(order.shape[0]):
+    in one pass (numpy's three gathers took 15 % of a build): those of
+    order[k0:k1] (part j of on_parts; the whole order: 0, 0, len(order)).
+    Not a parallel kernel, as prim_bounds: a spinning OpenMP thread would
+    slow the next tree's build."""
+    for k in range(k0, k1):
         t = tris[order[k]]
         tri[r0 + k] = t
         for q in range(9):
@@ -482,7 +564,7 @@ def sah_cost(box, child, count, root):
 # build_small_trees takes trees below this many triangles: build_region
 # splits them on one thread all the same (below 2 MIN_TASK), and their
 # fewer than REFIT_MIN_NODES nodes are refit in one piece
-SMALL_TREE = min(2 * MIN_TASK, REFIT_MIN_NODES // 2)
+SMALL_TREE = REFIT_MIN_NODES // 2
 
 
 @kernel
@@ -520,14 +602,14 @@ def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo,
         s_box = np.empty((4 * m + 1, 6), np.float32)
         s_child = np.empty(4 * m + 1, np.int64)
         s_count = np.empty(4 * m + 1, np.int64)
-        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, s_box, s_child, s_count, 0,
+        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
                      no_tasks, no_tasks, no_tasks, no_span)
         order = prims.view(np.int32)[:, 3].copy()
-        n_used, c = _relayout(s_box, s_child, s_count, no_tasks, n0, r0, box, child, count)
+        n_used, c = _relayout(s_box, s_child, s_count, n0, r0, box, child, count)
         for i in range(n0 + n_used, n0 + 2 * m):
             child[i] = -1
             count[i] = 0
-        gather_references(group, order, tri_verts, faces, r0, tri, verts, leaf_faces)
+        gather_references(group, order, tri_verts, faces, r0, tri, verts, leaf_faces, 0, 0, m)
         used[j] = n_used
         cost[j] = c
         run_end[j] = descendants_end(child, count, n0) if count[n0] <= 0 and child[n0] >= 0 else n0 + 1

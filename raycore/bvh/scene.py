@@ -23,7 +23,8 @@ import time
 import numba
 import numpy as np
 
-from raycore.bvh.build import SMALL_TREE, build_region, build_region_of_tris, build_small_trees, gather_references
+from raycore.bvh.build import (PARALLEL_ROWS, SMALL_TREE, build_region, build_region_of_tris, build_small_trees,
+                               gather_references, on_parts)
 from raycore.bvh.nodes import MAX_LEAF, Bvh, empty_bvh
 from raycore.bvh.refit import REFIT_PIECES, refit, refit_plan
 from raycore.jit.thread_pool import on_threads
@@ -125,7 +126,8 @@ class SceneBvh:
         used, cost = build_region_of_tris(tri_verts, tris, MAX_LEAF, n0, r0, b.box, b.child, b.count, order,
                                           numba.get_num_threads())
         # the region's nodes past `used` are never reached (nor written: untouched, they take no memory)
-        gather_references(tris, order, tri_verts, self.faces, r0, b.tri, b.verts, self.leaf_faces)
+        on_parts(gather_references, m, numba.get_num_threads() if m >= PARALLEL_ROWS else 1, tris, order,
+                 tri_verts, self.faces, r0, b.tri, b.verts, self.leaf_faces)
         self.built_cost[g] = self.cost[g] = cost
         self.used[g] = used
         if self.moving[g]:

@@ -549,7 +549,7 @@ def test_a_tree_built_by_many_threads_is_the_one_built_by_one(rng, monkeypatch):
              "one point": np.tile(np.float32([1, 2, 3, 1, 2, 3.5, 1.5, 2, 3]), (n, 1)), "odd corners": odd}
     builds = []
     real = bvh_build._build_nodes
-    monkeypatch.setattr(bvh_build, "_build_nodes", lambda *a: builds.append(a[11]) or real(*a))
+    monkeypatch.setattr(bvh_build, "_build_nodes", lambda *a: builds.append(a[12]) or real(*a))
     for name, tv in cases.items():
         builds.clear()
         one = _build(tv, 1)
