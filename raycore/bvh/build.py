@@ -416,8 +416,8 @@ def _rows_of_tris(tri_verts, tris, n_workers):
 def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
     """build_region over the triangles tris of tri_verts (their boxes and
     centroids as prim_bounds gives them), the same tree."""
-    prims, cents, span0 = _rows_of_tris(tri_verts, tris, n_workers)
-    return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
+    return _build_rows(list(_rows_of_tris(tri_verts, tris, n_workers)), max_leaf, node0, ref0, box, child, count,
+                       order, n_workers)
 
 
 def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
@@ -436,7 +436,9 @@ def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, or
     count (nor on whether it was built in parallel at all)."""
     prims, cents, span0 = _empty_rows(bounds.shape[0])
     _start_build(bounds, centroids, prims, cents, span0)
-    return _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers)
+    rows = [prims, cents, span0]
+    del prims, cents
+    return _build_rows(rows, max_leaf, node0, ref0, box, child, count, order, n_workers)
 
 
 def _empty_rows(m):
@@ -444,8 +446,13 @@ def _empty_rows(m):
     return np.empty((m, ROW), np.float32), np.empty((m, ROW), np.float32), np.empty((1, 2 * ROW), np.float32)
 
 
-def _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, order, n_workers):
-    """build_region from its primitives' rows (prims, cents, span0)."""
+def _build_rows(rows, max_leaf, node0, ref0, box, child, count, order, n_workers):
+    """build_region from its primitives' rows: the list [prims, cents,
+    span0], emptied here, so that the rows (64 bytes a primitive) are freed
+    once the leaf order is read, before the nodes are laid out (at 10M
+    triangles the build's peak was rows, scratch and nodes at once)."""
+    prims, cents, span0 = rows
+    rows.clear()
     m = prims.shape[0]
     # scratch nodes: the root (0) and the split jobs' children, pairs from 1
     # on (at most one split per primitive), then each subtree built whole
@@ -464,6 +471,7 @@ def _build_rows(prims, cents, span0, max_leaf, node0, ref0, box, child, count, o
         _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
                      no_task, no_task, no_task, np.empty((1, 2 * ROW), np.float32))
     order[:] = prims.view(np.int32)[:, 3]
+    del prims, cents
     return _relayout(s_box, s_child, s_count, node0, ref0, box, child, count)
 
 

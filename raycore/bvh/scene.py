@@ -81,7 +81,9 @@ class SceneBvh:
         # every tree's triangles in one array (tree g's: all_tris[tri_start[g]:tri_start[g + 1]])
         self.tri_start = np.zeros(n_groups + 1, np.int64)
         np.cumsum([len(g) for g in groups], out=self.tri_start[1:])
-        self.all_tris = np.concatenate(groups) if groups else np.zeros(0, np.int32)
+        # (one tree: its own array, not a copy, 4 bytes a triangle)
+        self.all_tris = (groups[0] if len(groups) == 1 else np.concatenate(groups) if groups
+                         else np.zeros(0, np.int32))
         # the moving trees' refit plans (refit.refit_plan) in fixed slots,
         # REFIT_PIECES pieces and REFIT_PIECES - 1 top nodes a tree (-1: unused),
         # rewritten by a tree's build: no joining of 110 marbles' plans per frame
