@@ -23,7 +23,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 from raycore.bvh.nodes import C_INTERSECT, C_TRAVERSE, CHILD, COUNT, SAH_DEPTH, STACK, half_area
 from raycore.bvh.refit import REFIT_MIN_NODES, descendants_end
 from raycore.jit.presets import helper, kernel
-from raycore.jit.row8 import min_rows, swap_rows
+from raycore.jit.row8 import min_centroid_rows, min_rows, swap_rows
 from raycore.jit.thread_pool import thread_pool
 from raycore.jit.tile_queue import next_tile
 from raycore.jit.floats import INF
@@ -61,11 +61,14 @@ def prim_bounds(tri_verts, tris, bounds, centroids):
 
 # The build's data, 8 floats a row, so that a primitive's box is one vector
 # (jit/row8.py): a primitive (m, 8) is lo x, y, z, its number (int32 bits),
-# -hi x, y, z, 0; its centroid (m, 8) c x, y, z, 0, -c x, y, z, 0; a bin's box
-# (8) and a span (16: box, then centroid bounds) alike. Every bound is then a
+# -hi x, y, z, 0; a bin's box (8) alike, and a span (16) a box, then its
+# centroids' bounds as a row c x, y, z, 0, -c x, y, z, 0. Every bound is then a
 # minimum (of -hi where it is a maximum), taken 8 lanes at a time: the same
 # trees as with separate minima and maxima (-max(x) = min(-x) exactly),
-# built 1.4-1.6x faster on two threads.
+# built 1.4-1.6x faster on two threads. A primitive's centroid is computed
+# from its box where it is needed (_centroid, row8.min_centroid_rows): a row
+# of its own held 32 bytes a triangle at the build's peak and doubled the
+# rows each partition moves.
 ROW = 8
 
 
@@ -95,6 +98,16 @@ def _bin_scale(ext):
 
 
 @helper
+def _centroid(prims, k, a):
+    """Primitive k's centroid on axis a: (lo + hi) / 2, or 0 for a box with
+    no finite corner on a (lo > hi), as prim_bounds gives it (lo - (-hi)
+    is lo + hi exactly)."""
+    lo = prims[k, a]
+    neg_hi = prims[k, 4 + a]
+    return np.float32(0.5) * (lo - neg_hi) if lo <= -neg_hi else np.float32(0.0)
+
+
+@helper
 def _empty(rows, i, n):
     """rows[i, :n] = inf: the start of a minimum."""
     for q in range(n):
@@ -102,7 +115,7 @@ def _empty(rows, i, n):
 
 
 @helper
-def _span(prims, cents, s, e, out, row):
+def _span(prims, s, e, out, row):
     """out[row] (16) = the box and the centroids' bounds of primitives s..e-1
     (the root's, and the children of a split by count)."""
     box = out[row:row + 1, 0:ROW]
@@ -110,7 +123,7 @@ def _span(prims, cents, s, e, out, row):
     _empty(out, row, 2 * ROW)
     for k in range(s, e):
         min_rows(box, 0, prims, k)
-        min_rows(cen, 0, cents, k)
+        min_centroid_rows(cen, 0, prims, k)
 
 
 # count of a node whose subtree is left to a job of its own
@@ -119,7 +132,7 @@ DEFERRED = -4
 
 
 @kernel
-def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, box, child, count, stop_n,
+def _build_nodes(prims, max_leaf, s0, e0, depth0, span0, root, alloc0, box, child, count, stop_n,
                  task_s, task_e, task_d, task_span):
     """Binned-SAH subtree over primitives s0..e0-1 (their box and centroid
     bounds span0 (16,), at depth depth0) into the scratch node root and,
@@ -127,7 +140,7 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, bo
     A node of fewer than stop_n primitives is not split here:
     it is marked DEFERRED and listed in task_* (first, end, depth, span),
     for build_region's workers. Returns (one past the last node used, tasks).
-    prims, cents (m, 8): see ROW; the partition moves their rows in place."""
+    prims (m, 8): see ROW; the partition moves its rows in place."""
     st_node = np.empty(STACK, np.int64)
     st_s = np.empty(STACK, np.int64)
     st_e = np.empty(STACK, np.int64)
@@ -184,7 +197,7 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, bo
                 for a in range(3):
                     if scale[a] == 0:                  # not binned: c - lo may not be finite
                         continue
-                    b = min(int((cents[k, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                    b = min(int((_centroid(prims, k, a) - c_lo[a]) * scale[a]), N_BINS - 1)
                     bin_n[a, b] += 1
                     filled[a] |= np.int64(1) << b
                     min_rows(bins, a * N_BINS + b, prims, k)
@@ -250,16 +263,15 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, bo
             _empty(spans, 3, ROW)
             i, j = s, e - 1
             while i <= j:
-                b = min(int((cents[i, a] - c_lo[a]) * scale[a]), N_BINS - 1)
+                b = min(int((_centroid(prims, i, a) - c_lo[a]) * scale[a]), N_BINS - 1)
                 if b <= best_bin:
                     min_rows(spans, 0, prims, i)
-                    min_rows(spans, 1, cents, i)
+                    min_centroid_rows(spans, 1, prims, i)
                     i += 1
                 else:
                     swap_rows(prims, i, j)
-                    swap_rows(cents, i, j)
                     min_rows(spans, 2, prims, j)
-                    min_rows(spans, 3, cents, j)
+                    min_centroid_rows(spans, 3, prims, j)
                     j -= 1
             mid = i
             split_axis = a
@@ -274,8 +286,8 @@ def _build_nodes(prims, cents, max_leaf, s0, e0, depth0, span0, root, alloc0, bo
             split_axis = 0
         if mid == s or mid == e or best_axis < 0:
             mid = s + n // 2
-            _span(prims, cents, s, mid, st_span, left)
-            _span(prims, cents, mid, e, st_span, right)
+            _span(prims, s, mid, st_span, left)
+            _span(prims, mid, e, st_span, right)
         child[node] = alloc
         count[node] = -1 - split_axis
         st_node[top], st_s[top], st_e[top], st_d[top] = alloc + 1, mid, e, depth + 1
@@ -342,30 +354,26 @@ PARALLEL_ROWS = 1 << 16
 
 
 @kernel
-def _start_build(bounds, centroids, prims, cents, span0):
-    """prims, cents (m, 8) (see ROW) from each primitive's box and centroid;
-    span0[0] (16): the box and centroid bounds of them all (numpy's axis-0
-    min and max took 9 ms on 77K triangles, a fifth of the build)."""
+def _start_build(bounds, prims, span0):
+    """prims (m, 8) (see ROW) from each primitive's box; span0[0] (16): the
+    box and centroid bounds of them all (numpy's axis-0 min and max took
+    9 ms on 77K triangles, a fifth of the build)."""
     prims_i = prims.view(np.int32)
     for i in range(bounds.shape[0]):
         for q in range(3):
             prims[i, q] = bounds[i, q]
             prims[i, 4 + q] = -bounds[i, 3 + q]
-            cents[i, q] = centroids[i, q]
-            cents[i, 4 + q] = -centroids[i, q]
         prims_i[i, 3] = i
         prims[i, 7] = np.float32(0.0)
-        cents[i, 3] = np.float32(0.0)
-        cents[i, 7] = np.float32(0.0)
-    _span(prims, cents, 0, bounds.shape[0], span0, 0)
+    _span(prims, 0, bounds.shape[0], span0, 0)
 
 
 @kernel
-def _start_build_tris(tri_verts, tris, prims, cents, spans, j, k0, k1):
+def _start_build_tris(tri_verts, tris, prims, spans, j, k0, k1):
     """_start_build's rows k0..k1-1 straight from triangles tris[k0:k1] of
-    tri_verts, with prim_bounds's boxes and centroids, bit for bit, and
-    without their (m, 9) arrays (a first build at 10M triangles held 360 MB
-    of them); spans[j]: those rows' span (part j of _rows_of_tris)."""
+    tri_verts, with prim_bounds's boxes, bit for bit, and without their
+    (m, 6) array (a first build at 10M triangles held 360 MB of boxes and
+    centroids); spans[j]: those rows' span (part j of _rows_of_tris)."""
     prims_i = prims.view(np.int32)
     for k in range(k0, k1):
         t = tris[k]
@@ -373,14 +381,9 @@ def _start_build_tris(tri_verts, tris, prims, cents, spans, j, k0, k1):
             lo, hi = _tri_extent(tri_verts, t, a)
             prims[k, a] = lo
             prims[k, 4 + a] = -hi
-            c_a = np.float32(0.5) * (lo + hi) if lo <= hi else np.float32(0.0)
-            cents[k, a] = c_a
-            cents[k, 4 + a] = -c_a
         prims_i[k, 3] = k
         prims[k, 7] = np.float32(0.0)
-        cents[k, 3] = np.float32(0.0)
-        cents[k, 7] = np.float32(0.0)
-    _span(prims, cents, k0, k1, spans, j)
+    _span(prims, k0, k1, spans, j)
 
 
 def on_parts(kernel, n, n_parts, *args):
@@ -402,15 +405,15 @@ def on_parts(kernel, n, n_parts, *args):
 
 
 def _rows_of_tris(tri_verts, tris, n_workers):
-    """The build's rows (prims, cents, span0) of triangles tris, made on
+    """The build's rows (prims, span0) of triangles tris, made on
     n_workers threads from PARALLEL_ROWS triangles on (the span of each
     part, then their minimum: every lane of a span is one)."""
     m = tris.shape[0]
-    prims, cents, _ = _empty_rows(m)
+    prims, _ = _empty_rows(m)
     n_parts = max(n_workers, 1) if m >= PARALLEL_ROWS else 1
     spans = np.empty((n_parts, 2 * ROW), np.float32)
-    on_parts(_start_build_tris, m, n_parts, tri_verts, tris, prims, cents, spans)
-    return prims, cents, spans.min(axis=0, keepdims=True)
+    on_parts(_start_build_tris, m, n_parts, tri_verts, tris, prims, spans)
+    return prims, spans.min(axis=0, keepdims=True)
 
 
 def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
@@ -420,38 +423,39 @@ def build_region_of_tris(tri_verts, tris, max_leaf, node0, ref0, box, child, cou
                        order, n_workers)
 
 
-def build_region(bounds, centroids, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
-    """Binned-SAH tree over primitives 0..m-1 (bounds, centroids) into the
+def build_region(bounds, max_leaf, node0, ref0, box, child, count, order, n_workers=1):
+    """Binned-SAH tree over primitives 0..m-1 (bounds (m, 6); their
+    centroids (lo + hi) / 2, 0 on an axis where lo > hi) into the
     node region starting at node0 (root there, children in pairs after it).
     `order` (m,) receives the primitives in leaf order: leaf k's references
     are order[child[k] - ref0 ...] (child counts from the caller's
     reference base ref0). Returns the nodes used and the tree's SAH cost
-    (sah_cost's, summed while laying it out). bounds and centroids are
-    read only (copied into the build's rows, see ROW).
+    (sah_cost's, summed while laying it out). bounds is read only (copied
+    into the build's rows, see ROW).
 
     Nodes of ~m / TASKS_PER_TREE primitives and more are split one at a
     time by n_workers threads, the subtrees below them built whole, each
     into a scratch region of its own; then one pass lays the nodes out as a
     single serial pass would, so the tree does not depend on the thread
     count (nor on whether it was built in parallel at all)."""
-    prims, cents, span0 = _empty_rows(bounds.shape[0])
-    _start_build(bounds, centroids, prims, cents, span0)
-    rows = [prims, cents, span0]
-    del prims, cents
+    prims, span0 = _empty_rows(bounds.shape[0])
+    _start_build(bounds, prims, span0)
+    rows = [prims, span0]
+    del prims
     return _build_rows(rows, max_leaf, node0, ref0, box, child, count, order, n_workers)
 
 
 def _empty_rows(m):
-    """The build's rows of m primitives (prims, cents) and their span (see ROW)."""
-    return np.empty((m, ROW), np.float32), np.empty((m, ROW), np.float32), np.empty((1, 2 * ROW), np.float32)
+    """The build's rows of m primitives and their span (see ROW)."""
+    return np.empty((m, ROW), np.float32), np.empty((1, 2 * ROW), np.float32)
 
 
 def _build_rows(rows, max_leaf, node0, ref0, box, child, count, order, n_workers):
-    """build_region from its primitives' rows: the list [prims, cents,
-    span0], emptied here, so that the rows (64 bytes a primitive) are freed
-    once the leaf order is read, before the nodes are laid out (at 10M
+    """build_region from its primitives' rows: the list [prims, span0],
+    emptied here, so that the rows (32 bytes a primitive) are freed once
+    the leaf order is read, before the nodes are laid out (at 10M
     triangles the build's peak was rows, scratch and nodes at once)."""
-    prims, cents, span0 = rows
+    prims, span0 = rows
     rows.clear()
     m = prims.shape[0]
     # scratch nodes: the root (0) and the split jobs' children, pairs from 1
@@ -465,17 +469,17 @@ def _build_rows(rows, max_leaf, node0, ref0, box, child, count, order, n_workers
     s_count = np.empty(n_scratch, np.int32)
     no_task = np.empty(1, np.int64)
     if n_workers > 1 and m >= 2 * MIN_TASK:
-        _split_on_threads(prims, cents, span0[0], max_leaf, s_box, s_child, s_count, n_workers,
+        _split_on_threads(prims, span0[0], max_leaf, s_box, s_child, s_count, n_workers,
                           max(m // TASKS_PER_TREE, MIN_TASK))
     else:
-        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
+        _build_nodes(prims, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
                      no_task, no_task, no_task, np.empty((1, 2 * ROW), np.float32))
     order[:] = prims.view(np.int32)[:, 3]
-    del prims, cents
+    del prims
     return _relayout(s_box, s_child, s_count, node0, ref0, box, child, count)
 
 
-def _split_on_threads(prims, cents, span0, max_leaf, s_box, s_child, s_count, n_workers, stop_n):
+def _split_on_threads(prims, span0, max_leaf, s_box, s_child, s_count, n_workers, stop_n):
     """The tree over all m rows into the scratch nodes (root 0) by n_workers
     threads, sharing one list of jobs, the largest first: a job of at least
     stop_n primitives is one split (its node and its children's pair; the
@@ -505,14 +509,14 @@ def _split_on_threads(prims, cents, span0, max_leaf, s_box, s_child, s_count, n_
             try:
                 if split:
                     # stop_n = the job's size: the node is split, its children deferred as two jobs
-                    _, n_new = _build_nodes(prims, cents, max_leaf, s, e, depth, span, node, pair, s_box,
+                    _, n_new = _build_nodes(prims, max_leaf, s, e, depth, span, node, pair, s_box,
                                             s_child, s_count, e - s, two_s, two_e, two_d, two_span)
                     for t in range(n_new):
                         at = pair if s_child[pair] == t else pair + 1
                         new.append((-int(two_e[t] - two_s[t]), int(two_s[t]), int(two_e[t]), int(two_d[t]),
                                     two_span[t].copy(), at))
                 else:
-                    _build_nodes(prims, cents, max_leaf, s, e, depth, span, node, base + 2 * s, s_box, s_child,
+                    _build_nodes(prims, max_leaf, s, e, depth, span, node, base + 2 * s, s_box, s_child,
                                  s_count, 0, two_s, two_e, two_d, two_span)
             finally:
                 with ready:
@@ -608,13 +612,12 @@ def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo,
         centroids = np.empty((m, 3), np.float32)
         prim_bounds(tri_verts, group, bounds, centroids)
         prims = np.empty((m, ROW), np.float32)
-        cents = np.empty((m, ROW), np.float32)
         span0 = np.empty((1, 2 * ROW), np.float32)
-        _start_build(bounds, centroids, prims, cents, span0)
+        _start_build(bounds, prims, span0)
         s_box = np.empty((4 * m + 1, 6), np.float32)
         s_child = np.empty(4 * m + 1, np.int32)
         s_count = np.empty(4 * m + 1, np.int32)
-        _build_nodes(prims, cents, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
+        _build_nodes(prims, max_leaf, 0, m, 1, span0[0], 0, 1, s_box, s_child, s_count, 0,
                      no_tasks, no_tasks, no_tasks, no_span)
         order = prims.view(np.int32)[:, 3].copy()
         n_used, c = _relayout(s_box, s_child, s_count, n0, r0, box, child, count)

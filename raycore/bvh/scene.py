@@ -236,10 +236,8 @@ class SceneBvh:
             return
         roots = self.node_lo
         bounds = np.ascontiguousarray(b.box[roots])
-        centroids = np.where(bounds[:, :3] <= bounds[:, 3:], 0.5 * (bounds[:, :3] + bounds[:, 3:]), 0.0)
         order = np.empty(n_groups, np.int32)
-        used, _ = build_region(bounds, np.ascontiguousarray(centroids, np.float32), 1, 0, 0, b.box, b.child,
-                               b.count, order, 1)
+        used, _ = build_region(bounds, 1, 0, 0, b.box, b.child, b.count, order, 1)
         b.child[used:self.top_nodes] = -1
         b.count[used:self.top_nodes] = 0
         leaves = np.nonzero(b.count[:used] > 0)[0]

@@ -57,8 +57,8 @@ class Placement(NamedTuple):
 
 
 @parallel_kernel
-def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
-    """World box (6) and its centre of each instance: its tree's root box
+def instance_boxes(root_box, tree_of, forward, pad, bounds):
+    """World box (6) of each instance: its tree's root box
     (root_box[tree_of[j]]) under forward[j], in float64, widened by pad of
     its largest coordinate."""
     for j in numba.prange(tree_of.shape[0]):
@@ -75,7 +75,6 @@ def instance_boxes(root_box, tree_of, forward, pad, bounds, centroids):
                 hi = max(hi, w)
             bounds[j, a] = lo
             bounds[j, 3 + a] = hi
-            centroids[j, a] = np.float32(0.5 * (lo + hi))
         big = np.float32(0.0)
         for q in range(6):
             big = max(big, abs(bounds[j, q]))
@@ -229,10 +228,9 @@ class InstancedStructures:
             top.child[0], top.count[0] = -1, 0
         else:
             bounds = np.empty((m, 6), np.float32)
-            centroids = np.empty((m, 3), np.float32)
-            instance_boxes(bvh.box, place.tree, place.forward, BOX_PAD, bounds, centroids)
+            instance_boxes(bvh.box, place.tree, place.forward, BOX_PAD, bounds)
             order = np.empty(m, np.int32)
-            build_region(bounds, centroids, 1, 0, 0, top.box, top.child, top.count, order,
+            build_region(bounds, 1, 0, 0, top.box, top.child, top.count, order,
                          numba.get_num_threads())
             top.tri[:m] = order
         self.stats["instances"] = m - len(self.world_trees)

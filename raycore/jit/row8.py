@@ -60,3 +60,35 @@ def swap_rows(typingctx, a, i, j):
         builder.store(x, pj, align=4)
         return context.get_dummy_value()
     return sig, codegen
+
+
+_HALF_SWAP = ir.Constant(ir.VectorType(ir.IntType(32), 8), [4, 5, 6, 7, 0, 1, 2, 3])
+_LOW_LANES = ir.Constant(ir.VectorType(ir.IntType(1), 8), [1, 1, 1, 0, 0, 0, 0, 0])
+# (c x, y, z, 0) from the first vector, (-c x, y, z) from the second, 0
+_CENTROID_ROW = ir.Constant(ir.VectorType(ir.IntType(32), 8), [0, 1, 2, 3, 8, 9, 10, 7])
+
+
+@intrinsic
+def min_centroid_rows(typingctx, dst, i, src, k):
+    """dst[i, :8] = minimum(dst[i, :8], the centroid row of box row src[k]),
+    lane by lane: a box row is (lo x, y, z, -, -hi x, y, z, -) and its
+    centroid row (c x, y, z, 0, -c x, y, z, 0), c = (lo + hi) / 2 where
+    lo <= hi, else 0: the same floats, signed zeros too, as
+    bvh/build._centroid and its negation (lo - (-hi) = lo + hi exactly), so
+    that the centroids need no row of their own."""
+    sig = types.void(dst, types.int64, src, types.int64)
+
+    def codegen(context, builder, signature, args):
+        d_ty, _, s_ty, _ = signature.args
+        pd = _row_ptr(context, builder, d_ty, args[0], args[1])
+        ps = _row_ptr(context, builder, s_ty, args[2], args[3])
+        v = builder.load(ps, align=4)
+        w = builder.shuffle_vector(v, v, _HALF_SWAP)          # lanes 0-2: -hi
+        ok = builder.and_(builder.fcmp_ordered("<=", v, builder.fneg(w)), _LOW_LANES)
+        c = builder.fmul(builder.fsub(v, w), ir.Constant(V8, [0.5] * 8))
+        c = builder.select(ok, c, ir.Constant(V8, [0.0] * 8))
+        cent = builder.shuffle_vector(c, builder.fneg(c), _CENTROID_ROW)
+        d = builder.load(pd, align=4)
+        builder.store(builder.select(builder.fcmp_ordered("<", d, cent), d, cent), pd, align=4)
+        return context.get_dummy_value()
+    return sig, codegen

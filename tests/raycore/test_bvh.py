@@ -524,7 +524,7 @@ def _build(tv, n_workers):
     bounds, centroids = np.empty((m, 6), np.float32), np.empty((m, 3), np.float32)
     prim_bounds(tv, np.arange(m, dtype=np.int32), bounds, centroids)
     b, order = empty_bvh(2 * m, m), np.empty(m, np.int32)
-    used, cost = build_region(bounds, centroids, MAX_LEAF, 0, 0, b.box, b.child, b.count, order, n_workers)
+    used, cost = build_region(bounds, MAX_LEAF, 0, 0, b.box, b.child, b.count, order, n_workers)
     return b, used, cost, order
 
 
@@ -549,7 +549,7 @@ def test_a_tree_built_by_many_threads_is_the_one_built_by_one(rng, monkeypatch):
              "one point": np.tile(np.float32([1, 2, 3, 1, 2, 3.5, 1.5, 2, 3]), (n, 1)), "odd corners": odd}
     builds = []
     real = bvh_build._build_nodes
-    monkeypatch.setattr(bvh_build, "_build_nodes", lambda *a: builds.append(a[12]) or real(*a))
+    monkeypatch.setattr(bvh_build, "_build_nodes", lambda *a: builds.append(a[11]) or real(*a))
     for name, tv in cases.items():
         builds.clear()
         one = _build(tv, 1)
@@ -617,6 +617,45 @@ def test_the_row_vector_min_and_swap_are_numpys(rng):
     run(dst, src, pairs)
     assert np.array_equal(dst.view(np.uint32), expect.view(np.uint32))
 
+
+
+def test_the_centroid_row_is_the_centroid_prim_bounds_gives(rng):
+    """row8.min_centroid_rows and build._centroid (the build's centroids,
+    made from a primitive's box row where they are needed) against
+    prim_bounds's centroids, bit for bit: random boxes, boxes with no finite
+    corner on an axis (centroid 0, -0 in the negated lanes), one-point boxes,
+    signed zeros and coordinates near the float32 range's ends."""
+    from numba import njit
+    from raycore.bvh.build import _centroid, prim_bounds
+    from raycore.jit.row8 import min_centroid_rows
+    n = 400
+    tv = (rng.normal(size=(n, 9)) * rng.choice([1e-30, 1.0, 1e30], size=(n, 1))).astype(np.float32)
+    tv[rng.integers(0, n, 150), rng.integers(0, 9, 150)] = np.inf
+    tv[rng.integers(0, n, 150), rng.integers(0, 9, 150)] = np.nan
+    tv[:20] = np.nan
+    tv[20:40] = np.tile(tv[20:40, :3], 3)                        # one point
+    tv[40:50] = -0.0
+    tv[50:60] = np.float32([3e38, -3e38, 1, -3e38, 3e38, 1, 0, 0, 1])
+    bounds, centroids = np.empty((n, 6), np.float32), np.empty((n, 3), np.float32)
+    prim_bounds(tv, np.arange(n, dtype=np.int32), bounds, centroids)
+    rows = np.zeros((n, 8), np.float32)
+    rows[:, :3], rows[:, 4:7] = bounds[:, :3], -bounds[:, 3:]
+    rows.view(np.int32)[:, 3] = rng.integers(0, 2 ** 31 - 1, n)   # a primitive's number, as the build keeps it
+
+    @njit
+    def run(rows, cent, each):
+        for k in range(rows.shape[0]):
+            for a in range(3):
+                cent[k, a] = _centroid(rows, k, a)
+            each[k, :] = np.inf
+            min_centroid_rows(each, k, rows, k)
+
+    cent, each = np.empty((n, 3), np.float32), np.empty((n, 8), np.float32)
+    run(rows, cent, each)
+    assert np.array_equal(cent.view(np.uint32), centroids.view(np.uint32))
+    want = np.zeros((n, 8), np.float32)
+    want[:, :3], want[:, 4:7] = centroids, -centroids
+    assert np.array_equal(each.view(np.uint32), want.view(np.uint32))
 
 def _reachable(bvh, root=0):
     """Node ids reached from the root (the top level's), parents first."""
