@@ -38,8 +38,11 @@ class PassScene:
             self.geom = self.geom._replace(instances=instances)
         if self.built_vertices is None or not np.array_equal(vertices, self.built_vertices):
             geom = self.geom._replace(vertices=vertices)
-            self.tri_verts, built = self.structures.build(self.names, geom, self.cfg, self.buffers,
-                                                                  self.counters)
+            # the frame's corners may be left ungathered (structures.build) when
+            # this pass's own structures trace every ray: normals_for gathers the seen ones
+            self.tri_verts, built = self.structures.build(
+                self.names, geom, self.cfg, self.buffers, self.counters,
+                lazy_corners=self.camera_accel is None and self.fixed_shadow_accel is None)
             self.accel = built[cfg.accel] if self.camera_accel is None else self.camera_accel
             self.shadow_accel = (built.get(cfg.shadow_structure) if self.fixed_shadow_accel is None
                                  else self.fixed_shadow_accel)

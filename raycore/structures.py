@@ -29,6 +29,8 @@ class FrameStructures:
         self.faces, self.vf_start, self.vf_faces = faces, vf_start, vf_faces
         self.moving_tris, self.object_ranges = moving_tris, object_ranges
         self.bvh = None
+        self.vertices = None          # the last update's vertices
+        self.stale = False            # tri_verts not gathered for them (build's lazy corners)
         self.density = density
         n = faces.shape[0]
         self.tri_verts = np.empty((n, 9), np.float32)
@@ -75,10 +77,21 @@ class FrameStructures:
 
     def normals_for(self, prim):
         """The vertex normals, made now for the vertices of the hit triangles
-        prim that have none yet (after forget_normals)."""
-        mark_hit_vertices(prim.reshape(-1), self.faces, self.normal_state)
-        wanted_vertex_normals(self.normal_state, self.tri_verts, self.vf_start, self.vf_faces, self.normals)
+        prim that have none yet (after forget_normals); when the frame's
+        corners were left ungathered (build's lazy corners), the hit
+        triangles' corners gathered now, the only ones shading reads."""
+        mark_hit_vertices(prim.reshape(-1), self.faces, self.normal_state, self.vertices, self.tri_verts, self.stale)
+        wanted_vertex_normals(self.normal_state, self.vertices, self.faces, self.vf_start, self.vf_faces,
+                              self.normals)
         return self.normals
+
+    def corners(self):
+        """The frame's triangle corners, all of them (gathered now if the
+        build left them: a full build of the BVH's trees reads them all)."""
+        if self.stale:
+            gather_triangles(self.vertices, self.faces, self.tri_verts)
+            self.stale = False
+        return self.tri_verts
 
     def normals_now(self):
         """Vertex normals of the triangles of the last update (moving ones
@@ -94,6 +107,7 @@ class FrameStructures:
         """This frame's triangle corners (n, 9) f32: all of them, or after the
         first frame only the moving ones (also packed into self.packed)."""
         threads = numba.get_num_threads()
+        self.vertices, self.stale = vertices, False
         if not self.incremental:
             gather_triangles(vertices, self.faces, self.tri_verts)
             return self.tri_verts
@@ -112,11 +126,27 @@ class FrameStructures:
         grid: Grid = self.grid_bins.update(self.tri_verts, self.packed, self.static_bounds)
         return grid, self.tri_verts
 
-    def build(self, names, geom, cfg, buffers, counters) -> tuple:
+    def build(self, names, geom, cfg, buffers, counters, lazy_corners=False) -> tuple:
         """(tri_verts, {name: accelerator}) for this frame's vertices: the
         triangles gathered once, then each named structure built (grid, kd-tree)
-        or updated (the BVH's refit trees, bvh/scene.py) over them."""
+        or updated (the BVH's refit trees, bvh/scene.py) over them.
+
+        lazy_corners (a caller that reads tri_verts only through
+        normals_for's hits): when the BVH alone is asked for, its trees are
+        built and the normals are lazy, the corners are not gathered at all
+        (the refit reads the vertices): normals_for gathers the hit
+        triangles' and corners() all of them. At 10M triangles the gather
+        wrote 360 MB a frame (38-43 ms) for the ~0.5M triangles a
+        million-pixel image sees."""
         built = {}
+        if (lazy_corners and set(names) == {"bvh"} and self.bvh is not None and not self.bvh.first
+                and self.lazy_normals(cfg.width * cfg.height)):
+            self.vertices, self.stale = geom.vertices, True
+            trees = self.bvh
+            built["bvh"] = BvhAccel(trees.update(self.tri_verts, geom.vertices, corners=self.corners),
+                                    self.tri_verts, buffers.work)
+            counters.update(trees.stats)
+            return self.tri_verts, built
         if "grid" in names:
             grid, tri_verts = self.update(geom.vertices)
             counters["grid_dims"] = [int(d) for d in grid.dims]

@@ -89,7 +89,7 @@ def bvh_build_costs(scene, renderer, rows):
     per 100K triangles;
     how often a refit tree was rebuilt, and its largest SAH growth."""
     trees = renderer.structures.scene_bvh()
-    tri_verts = renderer.structures.tri_verts
+    tri_verts = renderer.structures.corners()
     builds = []
     for _ in range(5):
         t0 = time.perf_counter()

@@ -177,9 +177,12 @@ class SceneBvh:
         self._build_trees(tri_verts, list(range(len(self.groups))))
         self.first = False
 
-    def update(self, tri_verts, vertices=None) -> Bvh:
+    def update(self, tri_verts, vertices=None, corners=None) -> Bvh:
         """The tree of this frame's triangle corners tri_verts (n, 9), which
-        are vertices[faces] (vertices None: a soup, see SceneBvh)."""
+        are vertices[faces] (vertices None: a soup, see SceneBvh). corners:
+        where tri_verts may be stale (FrameStructures.build's lazy corners),
+        what gathers them, called before a tree is built again (a refit
+        reads the vertices)."""
         t0 = time.perf_counter()
         n_built = 0
         if self.first:
@@ -197,7 +200,7 @@ class SceneBvh:
             t1 = time.perf_counter()
             grown = [int(g) for g in idx if self.cost[g] > REBUILD_GROWTH * self.built_cost[g]]
             if grown:
-                self._build_trees(tri_verts, grown)
+                self._build_trees(tri_verts if corners is None else corners(), grown)
             n_built = len(grown)
             build_ms = (time.perf_counter() - t1) * 1e3
         t1 = time.perf_counter()

@@ -79,10 +79,13 @@ def vertex_normals_of(ids, tri_verts, vf_start, vf_faces, normals):
 
 
 @parallel_arith_kernel
-def mark_hit_vertices(prim, faces, state):
+def mark_hit_vertices(prim, faces, state, vertices, tri_verts, gather):
     """state[v] = 1 (wanted) for the vertices of the hit triangles prim (-1:
     a miss) whose normal is not made yet (state 0). Threads may mark one
-    vertex at once: they write the same byte."""
+    vertex at once: they write the same byte. With gather, each hit
+    triangle's corners are also copied from the vertices into tri_verts[t]
+    (the rows a pass's shading reads, when the frame's corners were not
+    all gathered: FrameStructures.build), in the same pass over the hits."""
     for i in prange(prim.shape[0]):
         t = prim[i]
         if t >= 0:
@@ -90,16 +93,59 @@ def mark_hit_vertices(prim, faces, state):
                 v = faces[t, k]
                 if state[v] == 0:
                     state[v] = 1
+                if gather:
+                    for a in range(3):
+                        tri_verts[t, 3 * k + a] = vertices[v, a]
 
 
 @parallel_arith_kernel
-def wanted_vertex_normals(state, tri_verts, vf_start, vf_faces, normals):
+def wanted_vertex_normals(state, vertices, faces, vf_start, vf_faces, normals):
     """vertex_normals for the vertices marked wanted (state 1), then made (2):
-    the same normals, bit for bit, for the vertices that are seen."""
+    the same normals, bit for bit, for the vertices that are seen, their
+    triangles' corners read from the vertices through the faces (the frame's
+    corners, tri_verts, are not gathered when only seen triangles need
+    them: FrameStructures.build)."""
     for v in prange(state.shape[0]):
         if state[v] == 1:
-            _vertex_normal(tri_verts, vf_start, vf_faces, normals, v)
+            nx = 0.0
+            ny = 0.0
+            nz = 0.0
+            for j in range(vf_start[v], vf_start[v + 1]):
+                f = vf_faces[j]
+                a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+                cx, cy, cz = _face_cross(vertices[a, 0], vertices[a, 1], vertices[a, 2], vertices[b, 0],
+                                         vertices[b, 1], vertices[b, 2], vertices[c, 0], vertices[c, 1],
+                                         vertices[c, 2])
+                nx += cx
+                ny += cy
+                nz += cz
+            _store_unit(normals, v, nx, ny, nz)
             state[v] = 2
+
+
+@helper
+def _face_cross(x0, y0, z0, x1, y1, z1, x2, y2, z2):
+    """(p1 - p0) x (p2 - p0) in float32: twice the triangle's area along its normal."""
+    e1x = x1 - x0
+    e1y = y1 - y0
+    e1z = z1 - z0
+    e2x = x2 - x0
+    e2y = y2 - y0
+    e2z = z2 - z0
+    return e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+
+
+@helper
+def _store_unit(normals, v, nx, ny, nz):
+    """normals[v] = (nx, ny, nz) made unit length (left as is when zero)."""
+    length = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if length > 0.0:
+        nx /= length
+        ny /= length
+        nz /= length
+    normals[v, 0] = nx
+    normals[v, 1] = ny
+    normals[v, 2] = nz
 
 
 @helper
@@ -110,20 +156,8 @@ def _vertex_normal(tri_verts, vf_start, vf_faces, normals, v):
     nz = 0.0
     for j in range(vf_start[v], vf_start[v + 1]):
         p = tri_verts[vf_faces[j]]
-        e1x = p[3] - p[0]
-        e1y = p[4] - p[1]
-        e1z = p[5] - p[2]
-        e2x = p[6] - p[0]
-        e2y = p[7] - p[1]
-        e2z = p[8] - p[2]
-        nx += e1y * e2z - e1z * e2y
-        ny += e1z * e2x - e1x * e2z
-        nz += e1x * e2y - e1y * e2x
-    length = np.sqrt(nx * nx + ny * ny + nz * nz)
-    if length > 0.0:
-        nx /= length
-        ny /= length
-        nz /= length
-    normals[v, 0] = nx
-    normals[v, 1] = ny
-    normals[v, 2] = nz
+        cx, cy, cz = _face_cross(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8])
+        nx += cx
+        ny += cy
+        nz += cz
+    _store_unit(normals, v, nx, ny, nz)

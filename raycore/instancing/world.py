@@ -236,9 +236,11 @@ class InstancedStructures:
         self.stats["instances"] = m - len(self.world_trees)
         return self.tri_verts, bvh, top, place
 
-    def build(self, names, geom, cfg, buffers, counters) -> tuple:
+    def build(self, names, geom, cfg, buffers, counters, lazy_corners=False) -> tuple:
         """(tri_verts, {name: accelerator}): one two-level structure serves
-        every name asked for (camera and shadow rays)."""
+        every name asked for (camera and shadow rays). lazy_corners is
+        FrameStructures.build's; an instanced world always gathers its
+        corners (its normals are never lazy)."""
         tri_verts, bvh, top, place = self.update(geom.vertices, geom.instances)
         counters.update(self.stats)
         accel = InstancedAccel(top, bvh, place, buffers.work)
