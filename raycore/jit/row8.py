@@ -29,20 +29,29 @@ def _row_ptr(context, builder, aryty, ary_val, row):
     return vector_pointer(context, builder, aryty, ary_val, [row, ir.Constant(ir.IntType(64), 0)])
 
 
-@intrinsic
-def min_rows(typingctx, dst, i, src, k):
-    """dst[i, :8] = minimum(dst[i, :8], src[k, :8]), lane by lane (d < s ? d : s)."""
-    sig = types.void(dst, types.int64, src, types.int64)
+def _row_minimum(name, of_row, doc):
+    """An intrinsic (dst, i, src, k): dst[i, :8] = minimum(dst[i, :8],
+    of_row(src[k, :8])), lane by lane (d < x ? d : x); of_row(builder,
+    vector) -> vector."""
+    def impl(typingctx, dst, i, src, k):
+        sig = types.void(dst, types.int64, src, types.int64)
 
-    def codegen(context, builder, signature, args):
-        d_ty, _, s_ty, _ = signature.args
-        pd = _row_ptr(context, builder, d_ty, args[0], args[1])
-        ps = _row_ptr(context, builder, s_ty, args[2], args[3])
-        d = builder.load(pd, align=4)
-        s = builder.load(ps, align=4)
-        builder.store(builder.select(builder.fcmp_ordered("<", d, s), d, s), pd, align=4)
-        return context.get_dummy_value()
-    return sig, codegen
+        def codegen(context, builder, signature, args):
+            d_ty, _, s_ty, _ = signature.args
+            pd = _row_ptr(context, builder, d_ty, args[0], args[1])
+            ps = _row_ptr(context, builder, s_ty, args[2], args[3])
+            x = of_row(builder, builder.load(ps, align=4))
+            d = builder.load(pd, align=4)
+            builder.store(builder.select(builder.fcmp_ordered("<", d, x), d, x), pd, align=4)
+            return context.get_dummy_value()
+        return sig, codegen
+    impl.__name__ = impl.__qualname__ = name
+    impl.__doc__ = doc
+    return intrinsic(impl)
+
+
+min_rows = _row_minimum("min_rows", lambda builder, v: v,
+                        """dst[i, :8] = minimum(dst[i, :8], src[k, :8]), lane by lane (d < s ? d : s).""")
 
 
 @intrinsic
@@ -68,27 +77,18 @@ _LOW_LANES = ir.Constant(ir.VectorType(ir.IntType(1), 8), [1, 1, 1, 0, 0, 0, 0, 
 _CENTROID_ROW = ir.Constant(ir.VectorType(ir.IntType(32), 8), [0, 1, 2, 3, 8, 9, 10, 7])
 
 
-@intrinsic
-def min_centroid_rows(typingctx, dst, i, src, k):
-    """dst[i, :8] = minimum(dst[i, :8], the centroid row of box row src[k]),
+def _centroid_row(builder, v):
+    """The centroid row of box row v (see min_centroid_rows)."""
+    w = builder.shuffle_vector(v, v, _HALF_SWAP)          # lanes 0-2: -hi
+    ok = builder.and_(builder.fcmp_ordered("<=", v, builder.fneg(w)), _LOW_LANES)
+    c = builder.fmul(builder.fsub(v, w), ir.Constant(V8, [0.5] * 8))
+    c = builder.select(ok, c, ir.Constant(V8, [0.0] * 8))
+    return builder.shuffle_vector(c, builder.fneg(c), _CENTROID_ROW)
+
+
+min_centroid_rows = _row_minimum("min_centroid_rows", _centroid_row, """dst[i, :8] = minimum(dst[i, :8], the centroid row of box row src[k]),
     lane by lane: a box row is (lo x, y, z, -, -hi x, y, z, -) and its
     centroid row (c x, y, z, 0, -c x, y, z, 0), c = (lo + hi) / 2 where
     lo <= hi, else 0: the same floats, signed zeros too, as
     bvh/build._centroid and its negation (lo - (-hi) = lo + hi exactly), so
-    that the centroids need no row of their own."""
-    sig = types.void(dst, types.int64, src, types.int64)
-
-    def codegen(context, builder, signature, args):
-        d_ty, _, s_ty, _ = signature.args
-        pd = _row_ptr(context, builder, d_ty, args[0], args[1])
-        ps = _row_ptr(context, builder, s_ty, args[2], args[3])
-        v = builder.load(ps, align=4)
-        w = builder.shuffle_vector(v, v, _HALF_SWAP)          # lanes 0-2: -hi
-        ok = builder.and_(builder.fcmp_ordered("<=", v, builder.fneg(w)), _LOW_LANES)
-        c = builder.fmul(builder.fsub(v, w), ir.Constant(V8, [0.5] * 8))
-        c = builder.select(ok, c, ir.Constant(V8, [0.0] * 8))
-        cent = builder.shuffle_vector(c, builder.fneg(c), _CENTROID_ROW)
-        d = builder.load(pd, align=4)
-        builder.store(builder.select(builder.fcmp_ordered("<", d, cent), d, cent), pd, align=4)
-        return context.get_dummy_value()
-    return sig, codegen
+    that the centroids need no row of their own.""")
