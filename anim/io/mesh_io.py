@@ -9,7 +9,7 @@ trimesh is imported only to parse a file that anim/io/mesh_cache.py has not kept
 """
 import numpy as np
 
-from anim.io import mesh_cache
+from anim.io import mesh_cache, ply
 from anim.errors import SceneError
 
 
@@ -25,6 +25,11 @@ def load_mesh(path, scene_file, key):
         raise SceneError(scene_file, key, f"mesh file not found: {path}") from None
     except OSError as exc:
         raise SceneError(scene_file, key, f"cannot read mesh {path}: {exc}") from None
+    if str(path).lower().endswith(".ply"):
+        direct = ply.read_triangles(data)     # a binary triangle PLY: its arrays as they lie
+        if direct is not None:
+            _check(*direct, path, scene_file, key)
+            return (*direct, None)
     cache_key = mesh_cache.key_of(path, data)
     cached = mesh_cache.load(cache_key)
     if cached is not None:
@@ -32,6 +37,14 @@ def load_mesh(path, scene_file, key):
     vertices, faces, uvs = _parse(path, scene_file, key)
     mesh_cache.store(cache_key, vertices, faces, uvs)
     return vertices, faces, uvs
+
+
+def _check(vertices, faces, path, scene_file, key):
+    """SceneError for a mesh without triangles or with coordinates that are not finite."""
+    if faces.size == 0:
+        raise SceneError(scene_file, key, f"mesh {path} has no triangles")
+    if not np.all(np.isfinite(vertices)):
+        raise SceneError(scene_file, key, f"mesh {path} has non-finite vertex coordinates")
 
 
 def _parse(path, scene_file, key):
@@ -45,10 +58,7 @@ def _parse(path, scene_file, key):
         raise SceneError(scene_file, key, f"cannot read mesh {path}: {exc}") from None
     vertices = np.ascontiguousarray(loaded.vertices, np.float32)
     faces = np.ascontiguousarray(loaded.faces, np.int32)
-    if faces.size == 0:
-        raise SceneError(scene_file, key, f"mesh {path} has no triangles")
-    if not np.all(np.isfinite(vertices)):
-        raise SceneError(scene_file, key, f"mesh {path} has non-finite vertex coordinates")
+    _check(vertices, faces, path, scene_file, key)
     if str(path).lower().endswith(".stl"):
         vertices, faces = merge_coincident(vertices, faces)
     uvs = getattr(loaded.visual, "uv", None)
