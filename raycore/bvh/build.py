@@ -45,7 +45,8 @@ def _tri_extent(tri_verts, t, a):
 
 @kernel
 def prim_bounds(tri_verts, tris, bounds, centroids):
-    """Box (6) and centroid (3) of each triangle tris[k] of tri_verts. A
+    """Box (6) and centroid (3) of each triangle tris[k] of tri_verts (the
+    reference the build's rows and centroids are tested against). A
     corner that is not finite is left out of the box (the grid does the
     same); a triangle with no finite corner gets an empty box. On one
     thread: the OpenMP threads of a parallel loop spin for a while after
@@ -588,7 +589,7 @@ def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo,
                       verts, leaf_faces, used, cost, run_end, queue):
     """Trees `which` (each of fewer than SMALL_TREE triangles: tree g's are
     tris[tri_start[g]:tri_start[g + 1]]) built into their regions as
-    bvh/scene.py's one-tree path builds them (prim_bounds, build_region,
+    bvh/scene.py's one-tree path builds them (build_region_of_tris,
     unused nodes cleared, gather_references), in one call: that path spends
     ~25 us of Python and dispatch a tree around ~15-20 us of building, and
     tumbling marbles rebuild ~9 trees of 80 triangles a frame (up to 50). Into
@@ -608,12 +609,9 @@ def build_small_trees(tri_verts, faces, tris, tri_start, which, node_lo, ref_lo,
         group = tris[tri_start[g]:tri_start[g + 1]]
         m = group.shape[0]
         n0, r0 = node_lo[g], ref_lo[g]
-        bounds = np.empty((m, 6), np.float32)
-        centroids = np.empty((m, 3), np.float32)
-        prim_bounds(tri_verts, group, bounds, centroids)
         prims = np.empty((m, ROW), np.float32)
         span0 = np.empty((1, 2 * ROW), np.float32)
-        _start_build(bounds, prims, span0)
+        _start_build_tris(tri_verts, group, prims, span0, 0, 0, m)
         s_box = np.empty((4 * m + 1, 6), np.float32)
         s_child = np.empty(4 * m + 1, np.int32)
         s_count = np.empty(4 * m + 1, np.int32)
