@@ -24,7 +24,7 @@ from raycore.bvh.nodes import C_INTERSECT, C_TRAVERSE, CHILD, COUNT, SAH_DEPTH, 
 from raycore.bvh.refit import REFIT_MIN_NODES, descendants_end
 from raycore.jit.presets import helper, kernel
 from raycore.jit.row8 import min_centroid_rows, min_rows, swap_rows
-from raycore.jit.thread_pool import thread_pool
+from raycore.jit.thread_pool import on_threads, thread_pool
 from raycore.jit.tile_queue import next_tile
 from raycore.jit.floats import INF
 
@@ -389,20 +389,11 @@ def _start_build_tris(tri_verts, tris, prims, spans, j, k0, k1):
 
 def on_parts(kernel, n, n_parts, *args):
     """kernel(*args, j, k0, k1) for each part j (k0..k1-1) of n_parts
-    consecutive parts of 0..n-1, at once on as many threads (one part: on
-    this thread)."""
+    consecutive parts of 0..n-1, at once on as many threads
+    (thread_pool.on_threads; one part: on this thread)."""
     cuts = np.linspace(0, n, max(n_parts, 1) + 1).astype(np.int64).tolist()
     parts = [(j, cuts[j], cuts[j + 1]) for j in range(len(cuts) - 1)]
-    if len(parts) == 1:
-        kernel(*args, *parts[0])
-        return
-    pool = thread_pool("bvh-build", len(parts) - 1)
-    others = [pool.submit(kernel, *args, *part) for part in parts[1:]]
-    try:
-        kernel(*args, *parts[0])
-    finally:
-        for f in others:
-            f.result()
+    on_threads(lambda *a: kernel(*a[:-1], *a[-1]), len(parts), *args, per_worker=parts)
 
 
 def _rows_of_tris(tri_verts, tris, n_workers):
